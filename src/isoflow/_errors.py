@@ -1,0 +1,104 @@
+"""Exception hierarchy of isoflow.
+
+Every error raised on purpose by the library derives from :class:`IsoflowError` and, where one
+fits, from the matching builtin (``ValueError``, ``TypeError``, ``RuntimeError``), so that both
+``except iso.IsoflowError`` and ``except ValueError`` catch bad input.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ConvergenceError",
+    "DtypeError",
+    "InvalidBError",
+    "IsoflowError",
+    "NonFiniteError",
+    "NotInSpaceError",
+    "ShapeError",
+    "StepSizeError",
+    "TimeSpanError",
+]
+
+
+class IsoflowError(Exception):
+    """Base class of every error isoflow raises on purpose."""
+
+
+class ShapeError(IsoflowError, ValueError):
+    """An array has the wrong shape (a state, the output of ``B``, a coordinate vector)."""
+
+
+class DtypeError(IsoflowError, TypeError):
+    """An array has a dtype the space cannot hold (e.g. complex data for a real algebra)."""
+
+
+class NonFiniteError(IsoflowError, ValueError):
+    """An array holds NaN or Inf where finite numbers are required."""
+
+
+class NotInSpaceError(IsoflowError, ValueError):
+    """A matrix is farther from its space than the tolerance allows.
+
+    Attributes
+    ----------
+    distance : float
+        Largest Frobenius distance to the space over the ensemble.
+    tolerance : float
+        The tolerance it was compared with.
+    """
+
+    def __init__(self, message: str, *, distance: float, tolerance: float) -> None:
+        super().__init__(message)
+        self.distance = distance
+        self.tolerance = tolerance
+
+
+class InvalidBError(IsoflowError, ValueError):
+    """The map ``B`` of a problem returned something unusable.
+
+    Raised when ``B(W)`` has the wrong shape or dtype, holds non-finite numbers, or lies outside
+    the normalizer algebra ``N(V)`` that the isospectral flow ``W' = [B(W), W]`` requires.
+    """
+
+
+class StepSizeError(IsoflowError, ValueError):
+    """The step size is not positive and finite, or does not divide the time span."""
+
+
+class TimeSpanError(IsoflowError, ValueError):
+    """The time span is empty, reversed or not finite."""
+
+
+class ConvergenceError(IsoflowError, RuntimeError):
+    """The nonlinear solve of an implicit step did not converge.
+
+    Attributes
+    ----------
+    step : int
+        Index of the step that failed (0 for the step from ``t0``).
+    time : float
+        Time at the start of the failed step.
+    residual : float
+        Largest final residual over the ensemble.
+    iterations : int
+        Iterations spent on the failed step.
+    reason : str
+        ``"max_iter"``, ``"diverged"`` or ``"non_finite"``.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        step: int = 0,
+        time: float = float("nan"),
+        residual: float = float("nan"),
+        iterations: int = 0,
+        reason: str = "max_iter",
+    ) -> None:
+        super().__init__(message)
+        self.step = step
+        self.time = time
+        self.residual = residual
+        self.iterations = iterations
+        self.reason = reason

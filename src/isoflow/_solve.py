@@ -1,0 +1,348 @@
+"""The fixed-step time loop: :func:`solve` and :func:`step`."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from tqdm.auto import tqdm
+
+from ._errors import ConvergenceError, NonFiniteError, StepSizeError, TimeSpanError
+from .diagnostics import Diagnostics, compute_diagnostics
+from .methods import Method, StepResult
+from .problems import IsospectralProblem
+
+__all__ = ["Solution", "SolveStats", "solve", "step"]
+
+Array = NDArray[Any]
+
+STATUS_FINISHED = 0
+STATUS_FAILED = -1
+
+
+@dataclass(frozen=True)
+class SolveStats:
+    """Counters of a run.
+
+    Attributes
+    ----------
+    n_steps : int
+        Steps completed.
+    n_B_evaluations : int
+        Nonlinear iterations summed over steps and members (one ``B`` evaluation each).
+    iterations_mean, iterations_max : float, int
+        Nonlinear iterations per step and member.
+    residual_max : float
+        Largest final nonlinear residual over all steps and members.
+    wall_time : float
+        Seconds spent in the loop.
+    """
+
+    n_steps: int = 0
+    n_B_evaluations: int = 0
+    iterations_mean: float = 0.0
+    iterations_max: int = 0
+    residual_max: float = 0.0
+    wall_time: float = 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain-Python dictionary (JSON-ready)."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Solution:
+    """Result of :func:`solve`.
+
+    Attributes
+    ----------
+    ts : ndarray, shape (n_save,)
+        Saved times ``t0 + k dt``.
+    ys : ndarray, shape (n_save, *batch, *shape)
+        Saved states, time first.
+    stats : SolveStats
+    success : bool
+        Whether all requested steps were taken.
+    status : int
+        ``0`` finished, ``-1`` a step failed (only with ``throw=False``).
+    message : str
+        What happened, in words.
+    diagnostics : Diagnostics or None
+        Invariant drifts on the saved states (``None`` when ``diagnostics=False``).
+    t0, dt : float
+        Start time and step.
+    n_steps : int
+        Steps requested.
+    """
+
+    ts: Array
+    ys: Array
+    stats: SolveStats
+    success: bool
+    status: int
+    message: str
+    diagnostics: Diagnostics | None
+    t0: float
+    dt: float
+    n_steps: int
+
+    @property
+    def y_final(self) -> Array:
+        """The last saved state (the final state when ``success``)."""
+        return self.ys[-1]
+
+
+def _time_grid(
+    t0: float, t1: float | None, dt: float | None, n_steps: int | None
+) -> tuple[float, int]:
+    """Resolve ``(dt, n_steps)`` from the user's choice of two of ``t1``, ``dt``, ``n_steps``."""
+    if not math.isfinite(t0):
+        raise TimeSpanError(f"t0 must be finite, got {t0}")
+    if dt is not None and not (math.isfinite(dt) and dt > 0):
+        raise StepSizeError(f"dt must be positive and finite, got {dt}")
+    if n_steps is not None:
+        if isinstance(n_steps, bool) or int(n_steps) != n_steps or n_steps < 0:
+            raise StepSizeError(f"n_steps must be a non-negative integer, got {n_steps!r}")
+        n_steps = int(n_steps)
+    if t1 is not None:
+        if not math.isfinite(t1):
+            raise TimeSpanError(f"t1 must be finite, got {t1}")
+        if t1 < t0:
+            raise TimeSpanError(
+                f"t1 = {t1} is before t0 = {t0}; steps go forward in time (use a problem with "
+                "-B, or step() with a negative h, to integrate backwards)"
+            )
+    given = sum(x is not None for x in (t1, dt, n_steps))
+    if given != 2:
+        raise ValueError(
+            f"give exactly two of t1, dt and n_steps (got t1={t1}, dt={dt}, n_steps={n_steps})"
+        )
+    if t1 is None:
+        assert dt is not None and n_steps is not None
+        return dt, n_steps
+    span = t1 - t0
+    if dt is None:
+        assert n_steps is not None
+        if n_steps == 0:
+            if span != 0:
+                raise StepSizeError("n_steps = 0 needs t1 == t0")
+            return 1.0, 0
+        return span / n_steps, n_steps
+    assert dt is not None
+    n = round(span / dt)
+    if abs(n * dt - span) > 1e-9 * max(abs(span), abs(dt)):
+        raise StepSizeError(
+            f"t1 - t0 = {span!r} is not a whole number of steps dt = {dt!r} "
+            f"({span / dt:.6g} steps); choose dt = {span / max(n, 1)!r} or pass n_steps"
+        )
+    return dt, int(n)
+
+
+def _failure_message(method: Method, res: StepResult, k: int, t: float) -> str:
+    assert res.residual is not None and res.iterations is not None
+    reason = res.failure_reason()
+    bad = int(np.count_nonzero(np.asarray(res.status) != 0))
+    total = int(np.asarray(res.status).size)
+    return (
+        f"{method.name}: the nonlinear solve of step {k} (t = {t:.6g}) did not converge "
+        f"({reason}) for {bad} of {total} ensemble member(s): residual "
+        f"{float(np.max(res.residual)):.3e} after {int(np.max(res.iterations))} iterations. "
+        "Reduce dt (h * ||B(W)|| should stay well below 2) or change the solver."
+    )
+
+
+def step(
+    problem: IsospectralProblem,
+    method: Method,
+    y: ArrayLike,
+    h: float,
+    *,
+    validate: bool = True,
+    return_info: bool = False,
+) -> Any:
+    """Take one step of size ``h`` (any sign, nonzero) from ``y``.
+
+    Parameters
+    ----------
+    problem : IsospectralProblem
+    method : Method
+        e.g. ``iso.IsoMP()``.
+    y : array_like, shape (*batch, *shape)
+        Current state in ``V``.
+    h : float
+        Step size; negative steps integrate backwards (IsoMP is symmetric).
+    validate : bool
+        Check ``y`` and ``B(y)`` first (default).
+    return_info : bool
+        Also return the :class:`~isoflow.methods.StepResult` (stage ``X``, iterations, ...).
+
+    Returns
+    -------
+    y_next : ndarray, or ``(y_next, StepResult)`` when ``return_info``.
+
+    Raises
+    ------
+    ConvergenceError
+        If the nonlinear solve fails for any member.
+    """
+    if not (math.isfinite(h) and h != 0):
+        raise StepSizeError(f"h must be finite and nonzero, got {h}")
+    W = problem.algebra.validate(y, "state") if validate else np.asarray(y)
+    if validate:
+        problem.check_B(W)
+    res = method.step(problem, W, h, method.init(problem, W, h))
+    if not res.success:
+        raise ConvergenceError(
+            _failure_message(method, res, 0, 0.0),
+            step=0,
+            time=0.0,
+            residual=float(np.max(res.residual)) if res.residual is not None else float("nan"),
+            iterations=int(np.max(res.iterations)) if res.iterations is not None else 0,
+            reason=res.failure_reason(),
+        )
+    if not np.all(np.isfinite(res.y)):
+        raise NonFiniteError(f"{method.name} produced non-finite values in one step of h = {h}")
+    return (res.y, res) if return_info else res.y
+
+
+def solve(
+    problem: IsospectralProblem,
+    method: Method,
+    y0: ArrayLike,
+    *,
+    t0: float = 0.0,
+    t1: float | None = None,
+    dt: float | None = None,
+    n_steps: int | None = None,
+    save_every: int = 1,
+    diagnostics: bool = True,
+    progress: bool | None = None,
+    throw: bool = True,
+) -> Solution:
+    r"""Integrate ``problem`` from ``y0`` with a fixed step (no adaptivity, by design).
+
+    Parameters
+    ----------
+    problem : IsospectralProblem
+    method : Method
+        e.g. ``iso.IsoMP()``, ``iso.IsoMP(solver=iso.Newton())``.
+    y0 : array_like, shape (*batch, *shape)
+        Initial state; leading axes make an ensemble, solved in one call. It is checked to lie
+        in ``V`` (relative distance ``1e-10``) and then projected onto ``V`` exactly.
+    t0 : float
+        Start time.
+    t1, dt, n_steps :
+        Exactly two of them. ``t1`` with ``dt`` must be a whole number of steps (else
+        :class:`StepSizeError` says which ``dt`` would fit); the times are ``t0 + k dt``.
+    save_every : int
+        Save every this many steps; the initial and the final state are always saved.
+    diagnostics : bool
+        Compute :class:`~isoflow.diagnostics.Diagnostics` on the saved states.
+    progress : bool or None
+        Progress bar (tqdm). ``None``: only when stderr is a terminal, after one second.
+    throw : bool
+        If a step fails, raise :class:`ConvergenceError` (default) or return the solution so
+        far with ``success=False``; its last saved state is the last good state.
+
+    Returns
+    -------
+    Solution
+    """
+    if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
+        raise ValueError(f"save_every must be a positive integer, got {save_every!r}")
+    save_every = int(save_every)
+    dt_, n = _time_grid(float(t0), None if t1 is None else float(t1), dt, n_steps)
+    alg = problem.algebra
+    W = alg.validate(y0, "y0")
+    problem.check_B(W)
+
+    n_save = n // save_every + 1 + (1 if n % save_every else 0)
+    ys = np.empty((n_save, *W.shape), dtype=alg.dtype)
+    ts = np.empty(n_save)
+    ys[0], ts[0] = W, t0
+    i_save = 1
+
+    state = method.init(problem, W, dt_)
+    total_iter = 0
+    max_iter = 0
+    max_res = 0.0
+    status, message = STATUS_FINISHED, f"{n} steps of dt = {dt_:g} completed"
+    start = time.perf_counter()
+    k = 0
+    bar = tqdm(
+        total=n,
+        disable=(None if progress is None else not progress),
+        delay=1.0,
+        desc=method.name,
+        unit="step",
+        leave=False,
+    )
+    try:
+        for k in range(n):
+            t = t0 + k * dt_
+            res = method.step(problem, W, dt_, state)
+            if res.iterations is not None:
+                total_iter += int(np.sum(res.iterations))
+                max_iter = max(max_iter, int(np.max(res.iterations)))
+            if res.residual is not None and np.all(np.isfinite(res.residual)):
+                max_res = max(max_res, float(np.max(res.residual)))
+            failure: Exception | None = None
+            if not res.success:
+                failure = ConvergenceError(
+                    _failure_message(method, res, k, t),
+                    step=k,
+                    time=t,
+                    residual=float(np.max(res.residual)) if res.residual is not None else 0.0,
+                    iterations=int(np.max(res.iterations)) if res.iterations is not None else 0,
+                    reason=res.failure_reason(),
+                )
+            elif not np.all(np.isfinite(res.y)):
+                failure = NonFiniteError(
+                    f"{method.name}: the state became non-finite at step {k} (t = {t:.6g})"
+                )
+            if failure is not None:
+                if throw:
+                    raise failure
+                status, message = STATUS_FAILED, str(failure)
+                if ts[i_save - 1] != t:  # keep the last good state
+                    ys[i_save], ts[i_save] = W, t
+                    i_save += 1
+                break
+            W, state = res.y, res.state
+            if (k + 1) % save_every == 0 or k + 1 == n:
+                ys[i_save], ts[i_save] = W, t0 + (k + 1) * dt_
+                i_save += 1
+            bar.update(1)
+        else:
+            k = n
+    finally:
+        bar.close()
+    wall = time.perf_counter() - start
+    n_done = k if status == STATUS_FAILED else n
+    members = max(int(np.prod(alg.batch_shape(W))), 1)
+    stats = SolveStats(
+        n_steps=n_done,
+        n_B_evaluations=total_iter,
+        iterations_mean=total_iter / max(n_done + (status == STATUS_FAILED), 1) / members,
+        iterations_max=max_iter,
+        residual_max=max_res,
+        wall_time=wall,
+    )
+    ts, ys = ts[:i_save], ys[:i_save]
+    diag = compute_diagnostics(problem, ts, ys) if diagnostics else None
+    return Solution(
+        ts=ts,
+        ys=ys,
+        stats=stats,
+        success=status == STATUS_FINISHED,
+        status=status,
+        message=message,
+        diagnostics=diag,
+        t0=float(t0),
+        dt=dt_,
+        n_steps=n,
+    )

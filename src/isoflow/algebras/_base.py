@@ -1,0 +1,396 @@
+r"""The interface every space ``V`` implements, and the shared machinery of matrix algebras.
+
+A state of an isospectral flow :math:`\dot W = [B(W), W]` lives in a real vector space ``V``
+(a matrix space such as :math:`\mathfrak{so}(n)` or a compact vector form such as
+:math:`(\mathbb{R}^3, \times)^N`), and ``B`` takes values in the normalizer algebra
+:math:`\mathfrak{n}(V)` of ``V``. Methods only talk to a space through :class:`Algebra`:
+
+* ``bracket_and_triple(B, X)`` returns :math:`([B, X],\; B X B)`, the two products one
+  iteration of the isospectral minimal midpoint needs;
+* ``project`` maps onto ``V`` (used to keep iterates in ``V`` despite rounding);
+* ``inner`` is the real pairing used for gradients, coordinates and norms.
+
+Arrays carry leading batch axes: an array of shape ``(*batch, *algebra.shape)`` is an ensemble,
+and every operation broadcasts over ``batch``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+
+from .._errors import DtypeError, NonFiniteError, NotInSpaceError, ShapeError
+
+__all__ = ["Algebra", "MatrixAlgebra"]
+
+Array = NDArray[Any]
+
+
+class Algebra(ABC):
+    """A real vector space of states ``V`` together with the operations methods need.
+
+    Subclasses define the element shape, the dtype, the normalizer, the projection and the
+    products. Everything else (norms, distances, membership, coordinates) is derived here.
+
+    Attributes
+    ----------
+    name : str
+        Human-readable name, e.g. ``"so(10)"``.
+    shape : tuple of int
+        Shape of one element (``(n, n)`` for matrices, ``(N, 3)`` for vector forms).
+    dtype : numpy.dtype
+        ``float64`` for real spaces, ``complex128`` for complex ones.
+    """
+
+    name: str
+    shape: tuple[int, ...]
+    dtype: np.dtype[Any]
+
+    # ---- what a space must provide -------------------------------------------------------
+    @property
+    @abstractmethod
+    def normalizer(self) -> Algebra:
+        """The space ``B`` must take values in, so that ``[B, X]`` stays in ``V``."""
+
+    @property
+    def stage_algebra(self) -> Algebra:
+        r"""The space the midpoint stage ``X`` of IsoMP lives in.
+
+        ``V`` itself for every space of the paper except :math:`\mathfrak{su}(n)`: there
+        ``Tr(B X B)`` does not vanish, so ``X`` has a central part and lives in
+        :math:`\mathfrak{u}(n)`, while ``W_{k+1} = W_k + h [B(X), X]`` is traceless again.
+        """
+        return self
+
+    @abstractmethod
+    def project(self, W: Array) -> Array:
+        """Orthogonal projection onto ``V`` in the pairing :meth:`inner`."""
+
+    @abstractmethod
+    def bracket(self, A: Array, X: Array) -> Array:
+        """The Lie bracket ``[A, X]`` of an element ``A`` of the normalizer with ``X``."""
+
+    @abstractmethod
+    def bracket_and_triple(self, B: Array, X: Array) -> tuple[Array, Array]:
+        """Return ``([B, X], B X B)`` for ``B`` in the normalizer and ``X`` in ``V``.
+
+        Both results lie in ``V`` (up to rounding for the triple product; callers project).
+        """
+
+    @abstractmethod
+    def casimirs(self, W: Array) -> Array:
+        """Invariants of every isospectral flow on ``V``, shape ``(*batch, m)``."""
+
+    def casimir_scale(self, W0: Array) -> Array:
+        """Natural size of each Casimir component at ``W0``, to make drifts relative."""
+        C = self.casimirs(W0)
+        norm = np.maximum(self.norm(W0), np.finfo(float).tiny)
+        return np.broadcast_to(norm[..., None], C.shape)
+
+    @abstractmethod
+    def _basis_matrix(self) -> sp.csr_array:
+        """Sparse ``(dim, m)`` matrix whose rows are an orthonormal basis of ``V``,
+        written in the real flat representation of :meth:`_flatten`."""
+
+    # ---- derived machinery ----------------------------------------------------------------
+    @property
+    def core_ndim(self) -> int:
+        """Number of trailing axes that make up one element."""
+        return len(self.shape)
+
+    @property
+    def is_complex(self) -> bool:
+        """Whether elements are stored as complex numbers."""
+        return bool(np.issubdtype(self.dtype, np.complexfloating))
+
+    @cached_property
+    def basis_matrix(self) -> sp.csr_array:
+        """Orthonormal basis of ``V`` as a sparse ``(dim, m)`` matrix (cached)."""
+        return self._basis_matrix()
+
+    @property
+    def dim(self) -> int:
+        """Real dimension of ``V``."""
+        return int(self.basis_matrix.shape[0])
+
+    def batch_shape(self, W: Array) -> tuple[int, ...]:
+        """Leading (ensemble) axes of an array of elements."""
+        return tuple(W.shape[: W.ndim - self.core_ndim])
+
+    def inner(self, A: Array, X: Array) -> Array:
+        r"""Real pairing :math:`\langle A, X\rangle = \operatorname{Re}\sum \bar A_{ij} X_{ij}`.
+
+        For matrices this is the Frobenius pairing
+        :math:`\operatorname{Re}\operatorname{Tr}(A^\dagger X)` of the paper; gradients,
+        coordinates and the norm :meth:`norm` all refer to it.
+        """
+        axes = tuple(range(-self.core_ndim, 0))
+        return np.real(np.sum(np.conj(A) * X, axis=axes))
+
+    def norm(self, W: Array) -> Array:
+        """Norm induced by :meth:`inner` (the Frobenius norm for matrices), per member."""
+        axes = tuple(range(-self.core_ndim, 0))
+        return np.sqrt(np.sum(np.abs(W) ** 2, axis=axes))
+
+    def distance(self, W: Array) -> Array:
+        """Distance from ``W`` to ``V`` in :meth:`norm`, per ensemble member."""
+        return self.norm(W - self.project(W))
+
+    def contains(self, W: ArrayLike, rtol: float = 1e-10, atol: float = 1e-12) -> Array:
+        """Membership test ``distance(W) <= atol + rtol * norm(W)``, per member."""
+        Wa = np.asarray(W)
+        if Wa.shape[Wa.ndim - self.core_ndim :] != self.shape:
+            return np.zeros(Wa.shape[: max(Wa.ndim - self.core_ndim, 0)], dtype=bool)
+        if self.is_complex is False and np.iscomplexobj(Wa) and np.any(np.imag(Wa) != 0):
+            return np.zeros(self.batch_shape(Wa), dtype=bool)
+        Wc = Wa.astype(self.dtype) if not np.iscomplexobj(Wa) or self.is_complex else Wa.real
+        return self.distance(Wc) <= atol + rtol * self.norm(Wc)
+
+    def zeros(self, batch: tuple[int, ...] = ()) -> Array:
+        """The zero element (an ensemble of them for a non-empty ``batch``)."""
+        return np.zeros((*batch, *self.shape), dtype=self.dtype)
+
+    def random(
+        self,
+        seed: int | np.random.Generator | None = None,
+        batch: tuple[int, ...] = (),
+        scale: float = 1.0,
+    ) -> Array:
+        """A random element: Gaussian coordinates in the orthonormal basis, times ``scale``.
+
+        Parameters
+        ----------
+        seed : int, numpy.random.Generator or None
+            Seed or generator (``numpy.random.default_rng`` semantics).
+        batch : tuple of int
+            Ensemble shape.
+        scale : float
+            Standard deviation of each coordinate.
+        """
+        rng = np.random.default_rng(seed)
+        coords = rng.standard_normal((*batch, self.dim)) * scale
+        return self.from_coords(coords)
+
+    # ---- coordinates ---------------------------------------------------------------------
+    def _flatten(self, W: Array) -> Array:
+        """Real flat representation: ``(*batch, m)`` with ``m = size`` (real) or ``2 size``."""
+        batch = self.batch_shape(W)
+        flat = W.reshape(*batch, -1)
+        if self.is_complex:
+            return np.concatenate([flat.real, flat.imag], axis=-1)
+        return np.asarray(flat.real if np.iscomplexobj(flat) else flat, dtype=np.float64)
+
+    def _unflatten(self, v: Array) -> Array:
+        batch = v.shape[:-1]
+        if self.is_complex:
+            half = v.shape[-1] // 2
+            v = v[..., :half] + 1j * v[..., half:]
+        return np.asarray(v, dtype=self.dtype).reshape(*batch, *self.shape)
+
+    def to_coords(self, W: Array) -> Array:
+        """Coordinates of ``W`` in the orthonormal basis of ``V``, shape ``(*batch, dim)``.
+
+        Components of ``W`` orthogonal to ``V`` are dropped (this is the adjoint of
+        :meth:`from_coords`).
+        """
+        flat = self._flatten(np.asarray(W))
+        return np.asarray(self.basis_matrix @ flat.reshape(-1, flat.shape[-1]).T).T.reshape(
+            *flat.shape[:-1], self.dim
+        )
+
+    def from_coords(self, coords: ArrayLike) -> Array:
+        """The element of ``V`` with the given coordinates, shape ``(*batch, *shape)``."""
+        c = np.asarray(coords, dtype=np.float64)
+        if c.shape[-1:] != (self.dim,):
+            raise ShapeError(
+                f"coordinates for {self.name} must have trailing axis of length {self.dim}, "
+                f"got shape {c.shape}"
+            )
+        flat = np.asarray(self.basis_matrix.T @ c.reshape(-1, self.dim).T).T
+        return self._unflatten(flat.reshape(*c.shape[:-1], -1))
+
+    # ---- validation ----------------------------------------------------------------------
+    def validate(
+        self, W: ArrayLike, what: str = "state", rtol: float = 1e-10, atol: float = 1e-12
+    ) -> Array:
+        """Check that ``W`` is an (ensemble of) element(s) of ``V`` and return it projected.
+
+        Integer and float32 input is converted to the algebra's dtype; complex input for a
+        real space is rejected.
+
+        Raises
+        ------
+        DtypeError
+            Non-numeric data, or complex data for a real space.
+        ShapeError
+            Trailing axes differ from :attr:`shape`.
+        NonFiniteError
+            NaN or Inf entries.
+        NotInSpaceError
+            ``distance(W) > atol + rtol * norm(W)`` for some member (the message gives it).
+        """
+        Wa = np.asarray(W)
+        if Wa.dtype.kind not in "biufc" or Wa.dtype.kind == "b":
+            raise DtypeError(f"{what} must be a numeric array, got dtype {Wa.dtype}")
+        if Wa.dtype.kind == "c" and not self.is_complex:
+            raise DtypeError(
+                f"{what} is complex ({Wa.dtype}) but {self.name} is a real space; "
+                "pass real data (e.g. W.real) if the imaginary part is meant to be zero"
+            )
+        if Wa.shape[max(Wa.ndim - self.core_ndim, 0) :] != self.shape or Wa.ndim < self.core_ndim:
+            raise ShapeError(
+                f"{what} must have shape (*batch, {', '.join(map(str, self.shape))}) for "
+                f"{self.name}, got {Wa.shape}"
+            )
+        Wa = Wa.astype(self.dtype, copy=False)
+        if not np.all(np.isfinite(Wa)):
+            raise NonFiniteError(f"All entries of the {what} must be finite (found NaN or Inf).")
+        dist = self.distance(Wa)
+        tol = atol + rtol * self.norm(Wa)
+        if np.any(dist > tol):
+            worst = float(np.max(dist))
+            raise NotInSpaceError(
+                f"{what} is not in {self.name}: distance {worst:.3e} exceeds tolerance "
+                f"{float(np.max(tol)):.3e}",
+                distance=worst,
+                tolerance=float(np.max(tol)),
+            )
+        return self.project(Wa)
+
+    def __repr__(self) -> str:
+        return f"<algebra {self.name}>"
+
+
+class MatrixAlgebra(Algebra):
+    r"""A space of ``n x n`` matrices cut out by an exact involution ``sigma``.
+
+    ``V = {X : sigma(X) = X}`` (plus ``Tr X = 0`` where :attr:`traceless`), where ``sigma`` is a
+    signed permutation of the real entries (transpose, conjugate transpose, negation, or
+    conjugation by a symplectic ``J``). Hence
+
+    * the projection :math:`(Y + \sigma(Y))/2` is exact and idempotent in floating point;
+    * for ``B`` in the normalizer and ``X`` in ``V`` one has :math:`XB = -\sigma(BX)`, so the
+      commutator costs one matrix product: :math:`[B, X] = P + \sigma(P)` with ``P = B X``,
+      and it lies in ``V`` exactly. The triple product is ``P B``, a second product.
+
+    Subclasses set ``sigma`` (or ``None`` for ``gl(n)``), the normalizer and the Casimirs.
+    """
+
+    #: Whether elements have zero trace on top of ``sigma(X) = X``.
+    traceless: bool = False
+    #: Whether ``XB = -sigma(BX)`` holds for the normalizer, enabling the one-product bracket.
+    structured: bool = True
+
+    def __init__(self, n: int, dtype: Any, name: str) -> None:
+        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
+            raise ValueError(f"matrix size n must be a positive integer, got {n!r}")
+        self.n = int(n)
+        self.shape = (self.n, self.n)
+        self.dtype = np.dtype(dtype)
+        self.name = name
+
+    @abstractmethod
+    def sigma(self, Y: Array) -> Array:
+        """The involution defining ``V`` (exact in floating point)."""
+
+    def project(self, W: Array) -> Array:
+        P = 0.5 * (W + self.sigma(W))
+        if self.traceless:
+            tr = np.trace(P, axis1=-2, axis2=-1) / self.n
+            P = P - tr[..., None, None] * np.eye(self.n, dtype=P.dtype)
+        return P
+
+    def bracket(self, A: Array, X: Array) -> Array:
+        return A @ X - X @ A
+
+    def dagger(self, Y: Array) -> Array:
+        """Conjugate transpose over the last two axes."""
+        return np.conj(np.swapaxes(Y, -1, -2))
+
+    def bracket_and_triple(self, B: Array, X: Array) -> tuple[Array, Array]:
+        P = B @ X
+        if self.structured:
+            C = P + self.sigma(P)
+        else:
+            C = P - X @ B
+        return C, P @ B
+
+    # ---- basis generated from sigma --------------------------------------------------------
+    def _basis_matrix(self) -> sp.csr_array:
+        """Orthonormal basis read off the signed permutation ``sigma`` of real coordinates.
+
+        Applying ``sigma`` to the element whose real coordinates are ``1, 2, ..., m`` gives
+        ``sigma`` as ``(S v)_a = s_a v_{p(a)}``. Each orbit ``{a, p(a)}`` contributes
+        ``(e_{p(a)} + s_a e_a)/sqrt 2`` (or ``e_a`` when ``p(a) = a`` and ``s_a = +1``).
+        """
+        m = self.n * self.n * (2 if self.is_complex else 1)
+        probe = self._unflatten(np.arange(1, m + 1, dtype=np.float64))
+        image = self._flatten(self.sigma(probe))
+        perm = np.rint(np.abs(image)).astype(np.int64) - 1
+        sign = np.sign(image)
+        rows: list[int] = []
+        cols: list[int] = []
+        vals: list[float] = []
+        seen = np.zeros(m, dtype=bool)
+        diag_imag: list[int] = []  # coordinates of i*E_kk, replaced for traceless spaces
+        diag_real: list[int] = []
+        nn = self.n * self.n
+        diag_positions = {k * self.n + k for k in range(self.n)}
+        k_row = 0
+        for a in range(m):
+            if seen[a]:
+                continue
+            b = int(perm[a])
+            seen[a] = seen[b] = True
+            if b == a:
+                if sign[a] > 0:
+                    if self.traceless and (a % nn) in diag_positions:
+                        (diag_imag if a >= nn else diag_real).append(a)
+                        continue
+                    rows.append(k_row)
+                    cols.append(a)
+                    vals.append(1.0)
+                    k_row += 1
+                continue
+            rows += [k_row, k_row]
+            cols += [b, a]
+            vals += [1.0 / np.sqrt(2.0), float(sign[a]) / np.sqrt(2.0)]
+            k_row += 1
+        for diag in (diag_real, diag_imag):
+            # traceless diagonal: orthonormal (Helmert) basis of {d : sum d = 0}
+            for k in range(1, len(diag)):
+                norm = np.sqrt(k * (k + 1.0))
+                for j in range(k):
+                    rows.append(k_row)
+                    cols.append(diag[j])
+                    vals.append(1.0 / norm)
+                rows.append(k_row)
+                cols.append(diag[k])
+                vals.append(-k / norm)
+                k_row += 1
+        return sp.csr_array((vals, (rows, cols)), shape=(k_row, m))
+
+    def trace_powers(self, W: Array) -> Array:
+        r"""``Tr(W^k)`` for ``k = 1..n``, shape ``(*batch, n)``; Casimirs of every flow."""
+        out = []
+        P = W
+        for _ in range(self.n):
+            out.append(np.trace(P, axis1=-2, axis2=-1))
+            P = P @ W
+        return np.stack(out, axis=-1)
+
+    def casimir_scale(self, W0: Array) -> Array:
+        """Natural size of each Casimir component at ``W0`` (to turn drifts into relative ones)."""
+        norm = np.maximum(self.norm(W0), np.finfo(float).tiny)
+        if self.casimirs_are_eigenvalues:
+            return np.broadcast_to(norm[..., None], (*norm.shape, self.n))
+        k = np.arange(1, self.n + 1)
+        return norm[..., None] ** k
+
+    #: Whether :meth:`casimirs` returns eigenvalues (normal matrices) or trace powers.
+    casimirs_are_eigenvalues: bool = True

@@ -1,0 +1,39 @@
+r"""The special orthogonal algebra :math:`\mathfrak{so}(n)` of real skew-symmetric matrices."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._base import MatrixAlgebra
+
+__all__ = ["SpecialOrthogonal", "so"]
+
+
+class SpecialOrthogonal(MatrixAlgebra):
+    r""":math:`\mathfrak{so}(n) = \{W \in \mathbb{R}^{n\times n} : W^T = -W\}`.
+
+    Its own normalizer (for :math:`n \ge 3`, up to the centre of ``gl(n)``, which does not act),
+    real dimension :math:`n(n-1)/2`. Casimirs: the eigenvalues of the Hermitian matrix
+    :math:`iW`, in ascending order (the spectrum of ``W`` is :math:`\{-i\lambda\}`).
+    """
+
+    def __init__(self, n: int) -> None:
+        super().__init__(n, np.float64, f"so({n})")
+
+    @property
+    def normalizer(self) -> SpecialOrthogonal:
+        return self
+
+    def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
+        return -np.swapaxes(Y, -1, -2)
+
+    def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
+        return np.linalg.eigvalsh(1j * W)
+
+
+def so(n: int) -> SpecialOrthogonal:
+    r"""The Lie algebra :math:`\mathfrak{so}(n)` of real skew-symmetric ``n x n`` matrices."""
+    return SpecialOrthogonal(n)

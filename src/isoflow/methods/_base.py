@@ -1,0 +1,81 @@
+"""The contract every time-stepping method fulfils (see :class:`Method`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..nonlinear import STATUS_CONVERGED, STATUS_NAMES
+from ..problems import IsospectralProblem
+
+__all__ = ["Method", "StepResult"]
+
+Array = NDArray[Any]
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """One step ``y -> y_next`` of a method.
+
+    Attributes
+    ----------
+    y : ndarray
+        The new state, shape ``(*batch, *shape)``.
+    stage : ndarray or None
+        The implicit stage (``X`` for IsoMP, the midpoint for midpoint rules); ``None`` for
+        explicit methods.
+    iterations, residual, status : ndarray or None
+        Per-member nonlinear-solve record (``None`` for explicit methods).
+    state : object
+        Whatever the method carries to the next step (e.g. the warm start).
+    """
+
+    y: Array
+    stage: Array | None = None
+    iterations: NDArray[np.int64] | None = None
+    residual: NDArray[np.float64] | None = None
+    status: NDArray[np.int64] | None = None
+    state: Any = None
+
+    @property
+    def success(self) -> bool:
+        """Whether every member's nonlinear solve converged (always true for explicit methods)."""
+        return self.status is None or bool(np.all(self.status == STATUS_CONVERGED))
+
+    def failure_reason(self) -> str:
+        """Name of the first failure code, ``"converged"`` if none."""
+        if self.status is None or self.success:
+            return "converged"
+        code = int(self.status[self.status != STATUS_CONVERGED].flat[0])
+        return STATUS_NAMES.get(code, str(code))
+
+
+class Method:
+    """Base of the integrators: a small frozen dataclass with ``init`` and ``step``.
+
+    A method advances ``problem`` by one fixed step ``h`` with :meth:`step`; the solve loop owns
+    everything else (saving, diagnostics, failure policy). ``state`` is opaque to the loop.
+
+    Attributes
+    ----------
+    order : int
+        Classical order of accuracy.
+    implicit : bool
+        Whether a nonlinear solve is involved (and may fail).
+    """
+
+    order: ClassVar[int]
+    implicit: ClassVar[bool]
+    name: ClassVar[str]
+
+    def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
+        """Initial method state (default: none)."""
+        return None
+
+    def step(
+        self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
+    ) -> StepResult:  # pragma: no cover - abstract
+        raise NotImplementedError

@@ -1,0 +1,159 @@
+r"""Isospectral and Lie–Poisson problems :math:`\dot W = [B(W), W]` on a space ``V``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._errors import InvalidBError
+from .algebras import Algebra
+
+__all__ = ["IsospectralProblem"]
+
+Array = NDArray[Any]
+
+
+@dataclass(frozen=True)
+class IsospectralProblem:
+    r"""The isospectral flow :math:`\dot W = [B(W), W]`, ``W`` in ``V``, ``B(W)`` in ``N(V)``.
+
+    Parameters
+    ----------
+    B : callable
+        ``B(W)`` for ``W`` of shape ``(*batch, *algebra.shape)``, returning an array of shape
+        ``(*batch, *algebra.normalizer.shape)`` with values in ``algebra.normalizer``. It must
+        broadcast over leading axes (write ``np.swapaxes(W, -1, -2)``, not ``W.T``) unless
+        ``vectorized=False``.
+    algebra : Algebra
+        The space ``V`` (``iso.algebras.so(n)``, ...).
+    hamiltonian : callable, optional
+        ``H(W) -> (*batch,)`` real; only used for diagnostics. For a Lie–Poisson system
+        :math:`B = (\nabla H)^\dagger` (see :meth:`from_hamiltonian`).
+    B_jvp : callable, optional
+        Directional derivative ``B_jvp(W, dW) = DB(W)[dW]``; makes Newton's Jacobian exact.
+    invariants : mapping of str to callable, optional
+        Further first integrals ``I(W) -> (*batch,)`` or ``(*batch, m)`` tracked by the
+        diagnostics (e.g. a momentum map).
+    vectorized : bool
+        Whether ``B`` handles leading batch axes; if ``False`` it is applied member by member.
+    name : str
+        Name used in messages and output files.
+    parameters : mapping
+        The model parameters, recorded with results.
+    """
+
+    B: Callable[[Array], Array]
+    algebra: Algebra
+    hamiltonian: Callable[[Array], Array] | None = None
+    B_jvp: Callable[[Array, Array], Array] | None = None
+    invariants: Mapping[str, Callable[[Array], Array]] = field(default_factory=dict)
+    vectorized: bool = True
+    name: str = "isospectral problem"
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not callable(self.B):
+            raise TypeError(f"B must be callable, got {type(self.B).__name__}")
+        if not isinstance(self.algebra, Algebra):
+            raise TypeError(
+                "algebra must be an isoflow Algebra (e.g. iso.algebras.so(3)), "
+                f"got {self.algebra!r}"
+            )
+
+    # ---- evaluation ---------------------------------------------------------------------
+    def evaluate_B(self, W: Array) -> Array:
+        """``B(W)`` honouring :attr:`vectorized`."""
+        if self.vectorized:
+            return np.asarray(self.B(W))
+        batch = self.algebra.batch_shape(W)
+        flat = W.reshape(-1, *self.algebra.shape)
+        out = np.stack([np.asarray(self.B(w)) for w in flat])
+        return out.reshape(*batch, *out.shape[1:])
+
+    def evaluate_B_jvp(self, W: Array, dW: Array) -> Array:
+        """``DB(W)[dW]`` honouring :attr:`vectorized` (requires :attr:`B_jvp`)."""
+        assert self.B_jvp is not None
+        if self.vectorized:
+            return np.asarray(self.B_jvp(W, dW))
+        batch = self.algebra.batch_shape(W)
+        core = self.algebra.shape
+        Wf = np.broadcast_to(W, dW.shape).reshape(-1, *core)
+        dWf = dW.reshape(-1, *core)
+        out = np.stack([np.asarray(self.B_jvp(w, d)) for w, d in zip(Wf, dWf, strict=True)])
+        return out.reshape(*batch, *out.shape[1:])
+
+    def vector_field(self, W: Array) -> Array:
+        r"""The right-hand side :math:`[B(W), W]`."""
+        return self.algebra.project(self.algebra.bracket(self.evaluate_B(W), W))
+
+    def check_B(self, W: Array, rtol: float = 1e-8) -> Array:
+        """Evaluate ``B(W)`` once and check shape, dtype, finiteness and normalizer membership.
+
+        Raises
+        ------
+        InvalidBError
+            Naming what is wrong with ``B``'s output.
+        """
+        alg = self.algebra
+        norm_alg = alg.normalizer
+        try:
+            out = self.evaluate_B(W)
+        except InvalidBError:
+            raise
+        except Exception as exc:  # re-raise user errors with context, keep the cause
+            raise InvalidBError(f"B raised {type(exc).__name__}: {exc}") from exc
+        batch = alg.batch_shape(W)
+        expected = (*batch, *norm_alg.shape)
+        if out.shape != expected:
+            raise InvalidBError(
+                f"B returned shape {out.shape}, expected {expected} (values in "
+                f"{norm_alg.name}; B must broadcast over leading batch axes)"
+            )
+        if out.dtype.kind not in "iufc":
+            raise InvalidBError(f"B returned non-numeric dtype {out.dtype}")
+        if out.dtype.kind == "c" and not norm_alg.is_complex:
+            raise InvalidBError(
+                f"B returned complex values but its values must lie in the real algebra "
+                f"{norm_alg.name}"
+            )
+        if not np.all(np.isfinite(out)):
+            raise InvalidBError("B returned non-finite values (NaN or Inf)")
+        outc = out.astype(norm_alg.dtype, copy=False)
+        dist = norm_alg.distance(outc)
+        tol = 1e-12 + rtol * norm_alg.norm(outc)
+        if np.any(dist > tol):
+            raise InvalidBError(
+                f"B(W) is not in the normalizer {norm_alg.name} of {alg.name}: distance "
+                f"{float(np.max(dist)):.3e} (tolerance {float(np.max(tol)):.3e}); the flow "
+                f"W' = [B(W), W] would leave {alg.name}"
+            )
+        return outc
+
+    # ---- constructors -------------------------------------------------------------------
+    @classmethod
+    def from_hamiltonian(
+        cls,
+        algebra: Algebra,
+        hamiltonian: Callable[[Array], Array],
+        gradient: Callable[[Array], Array],
+        **kwargs: Any,
+    ) -> IsospectralProblem:
+        r"""The Lie–Poisson system of ``H`` on ``V = g``, identified with ``g*`` by the pairing.
+
+        With the real Frobenius pairing :math:`\langle A, X\rangle = \operatorname{Re}
+        \operatorname{Tr}(A^\dagger X)` (:meth:`Algebra.inner`), ``gradient(W)`` must return
+        :math:`\nabla H(W) \in V` and the flow is :math:`\dot W = [\nabla H(W)^\dagger, W]`
+        (paper, eq. (2)), i.e. ``B = gradient^dagger``. ``algebra`` must provide ``dagger``.
+        """
+        dagger = getattr(algebra, "dagger", None)
+        if dagger is None:
+            raise TypeError(f"{algebra.name} does not define the dagger map needed for B")
+
+        def B(W: Array) -> Array:
+            return dagger(gradient(W))
+
+        return cls(B=B, algebra=algebra, hamiltonian=hamiltonian, **kwargs)
