@@ -12,6 +12,7 @@ symplectic method for isospectral flows*. Quick start::
 from importlib.metadata import PackageNotFoundError, version
 
 from . import algebras as algebras
+from . import models as models
 from ._errors import ConvergenceError as ConvergenceError
 from ._errors import DtypeError as DtypeError
 from ._errors import InvalidBError as InvalidBError
@@ -64,6 +65,7 @@ __all__ = [
     "TimeSpanError",
     "__version__",
     "algebras",
+    "models",
     "reference_solution",
     "solve",
     "step",

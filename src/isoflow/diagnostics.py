@@ -6,6 +6,8 @@ All drifts are maxima over the saved times of the deviation from the first saved
   algebra's natural scale (``||W_0||`` for eigenvalues, ``||W_0||^k`` for ``Tr(W^k)``);
 * ``hamiltonian_drift``: :math:`\max_t |H(t) - H(t_0)|` (absolute) and
   ``hamiltonian_relative_drift`` divided by :math:`\max(|H(t_0)|, \text{tiny})`;
+* ``lyapunov_max_decrease``: :math:`\max_k \max(L(t_k) - L(t_{k+1}), 0)` for a function
+  ``L`` that the exact flow never decreases (zero means monotone on the saved states);
 * ``invariant_drift[name]``: :math:`\max_t \max |I(t) - I(t_0)|` (absolute);
 * ``max_distance``: :math:`\max_t \operatorname{dist}(W(t), V)` (Frobenius, absolute).
 """
@@ -37,6 +39,7 @@ class Diagnostics:
     distance : ndarray, shape (n_save, *batch)
     max_distance : ndarray, shape batch
     hamiltonian, hamiltonian_drift, hamiltonian_relative_drift : ndarray or None
+    lyapunov, lyapunov_max_decrease : ndarray or None
     invariants, invariant_drift : dict
     """
 
@@ -48,6 +51,8 @@ class Diagnostics:
     hamiltonian: Array | None = None
     hamiltonian_drift: Array | None = None
     hamiltonian_relative_drift: Array | None = None
+    lyapunov: Array | None = None
+    lyapunov_max_decrease: Array | None = None
     invariants: dict[str, Array] = field(default_factory=dict)
     invariant_drift: dict[str, Array] = field(default_factory=dict)
 
@@ -61,6 +66,8 @@ class Diagnostics:
             out["hamiltonian_drift"] = float(np.max(self.hamiltonian_drift))
             assert self.hamiltonian_relative_drift is not None
             out["hamiltonian_relative_drift"] = float(np.max(self.hamiltonian_relative_drift))
+        if self.lyapunov_max_decrease is not None:
+            out["lyapunov_max_decrease"] = float(np.max(self.lyapunov_max_decrease))
         for name, d in self.invariant_drift.items():
             out[f"{name}_drift"] = float(np.max(d))
         return out
@@ -88,6 +95,12 @@ def compute_diagnostics(problem: IsospectralProblem, ts: Array, ys: Array) -> Di
             hamiltonian_drift=dH,
             hamiltonian_relative_drift=dH / np.maximum(np.abs(H[0]), np.finfo(float).tiny),
         )
+    if problem.lyapunov is not None:
+        L = np.real(np.asarray(problem.lyapunov(ys)))
+        dec = (
+            np.max(np.maximum(L[:-1] - L[1:], 0.0), axis=0) if len(L) > 1 else np.zeros(L.shape[1:])
+        )
+        kw.update(lyapunov=L, lyapunov_max_decrease=dec)
     inv, inv_drift = {}, {}
     batch_nd = ys.ndim - 1 - alg.core_ndim
     for name, fn in problem.invariants.items():

@@ -35,6 +35,9 @@ class IsospectralProblem:
         :math:`B = (\nabla H)^\dagger` (see :meth:`from_hamiltonian`).
     B_jvp : callable, optional
         Directional derivative ``B_jvp(W, dW) = DB(W)[dW]``; makes Newton's Jacobian exact.
+    lyapunov : callable, optional
+        ``L(W) -> (*batch,)``, a function that is non-decreasing along the exact flow (e.g.
+        ``Tr(WN)`` for the Brockett flow); the diagnostics report its largest decrease.
     invariants : mapping of str to callable, optional
         Further first integrals ``I(W) -> (*batch,)`` or ``(*batch, m)`` tracked by the
         diagnostics (e.g. a momentum map).
@@ -50,6 +53,7 @@ class IsospectralProblem:
     algebra: Algebra
     hamiltonian: Callable[[Array], Array] | None = None
     B_jvp: Callable[[Array, Array], Array] | None = None
+    lyapunov: Callable[[Array], Array] | None = None
     invariants: Mapping[str, Callable[[Array], Array]] = field(default_factory=dict)
     vectorized: bool = True
     name: str = "isospectral problem"
