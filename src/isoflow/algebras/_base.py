@@ -192,6 +192,15 @@ class Algebra(ABC):
             v = v[..., :half] + 1j * v[..., half:]
         return np.asarray(v, dtype=self.dtype).reshape(*batch, *self.shape)
 
+    @cached_property
+    def _coordinate_maps(self) -> tuple[Any, Any]:
+        """``(basis, basis^T)``: dense for small spaces (fast), sparse otherwise (O(n^2) memory)."""
+        basis = self.basis_matrix
+        if basis.shape[0] * basis.shape[1] <= 2**20:
+            dense = basis.toarray()
+            return dense, np.ascontiguousarray(dense.T)
+        return basis, basis.T.tocsr()
+
     def to_coords(self, W: Array) -> Array:
         """Coordinates of ``W`` in the orthonormal basis of ``V``, shape ``(*batch, dim)``.
 
@@ -199,9 +208,10 @@ class Algebra(ABC):
         :meth:`from_coords`).
         """
         flat = self._flatten(np.asarray(W))
-        return np.asarray(self.basis_matrix @ flat.reshape(-1, flat.shape[-1]).T).T.reshape(
-            *flat.shape[:-1], self.dim
-        )
+        basis, _ = self._coordinate_maps
+        rows = flat.reshape(-1, flat.shape[-1])
+        coords = rows @ basis.T if isinstance(basis, np.ndarray) else (basis @ rows.T).T
+        return np.asarray(coords).reshape(*flat.shape[:-1], self.dim)
 
     def from_coords(self, coords: ArrayLike) -> Array:
         """The element of ``V`` with the given coordinates, shape ``(*batch, *shape)``."""
@@ -211,8 +221,10 @@ class Algebra(ABC):
                 f"coordinates for {self.name} must have trailing axis of length {self.dim}, "
                 f"got shape {c.shape}"
             )
-        flat = np.asarray(self.basis_matrix.T @ c.reshape(-1, self.dim).T).T
-        return self._unflatten(flat.reshape(*c.shape[:-1], -1))
+        basis, basis_t = self._coordinate_maps
+        rows = c.reshape(-1, self.dim)
+        flat = rows @ basis if isinstance(basis, np.ndarray) else (basis_t @ rows.T).T
+        return self._unflatten(np.asarray(flat).reshape(*c.shape[:-1], -1))
 
     # ---- validation ----------------------------------------------------------------------
     def validate(

@@ -1,0 +1,180 @@
+"""Algebra operations: structure, projections, bases, products (property-based where it helps)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import isoflow as iso
+from isoflow.algebras import Algebra
+
+ALGEBRAS = {
+    "so4": lambda: iso.algebras.so(4),
+    "u3": lambda: iso.algebras.u(3),
+    "su3": lambda: iso.algebras.su(3),
+    "sym4": lambda: iso.algebras.sym(4),
+    "herm3": lambda: iso.algebras.herm(3),
+    "sp4": lambda: iso.algebras.sp(4),
+    "sl2": lambda: iso.algebras.sl2(),
+    "glR3": lambda: iso.algebras.gl(3),
+    "glC3": lambda: iso.algebras.gl(3, complex=True),
+}
+#: The spaces that are Lie algebras themselves (V = its own normalizer, up to the centre).
+LIE = ["so4", "u3", "su3", "sp4", "sl2", "glR3", "glC3"]
+
+EXPECTED_DIM = {
+    "so4": 6,
+    "u3": 9,
+    "su3": 8,
+    "sym4": 10,
+    "herm3": 9,
+    "sp4": 10,
+    "sl2": 3,
+    "glR3": 9,
+    "glC3": 18,
+}
+
+seeds = st.integers(min_value=0, max_value=2**32 - 1)
+TOL = 1e-13
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b))))
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+def test_dimension_and_orthonormal_basis(key: str) -> None:
+    alg = ALGEBRAS[key]()
+    assert alg.dim == EXPECTED_DIM[key]
+    basis = alg.from_coords(np.eye(alg.dim))  # (dim, n, n)
+    gram = alg.inner(basis[:, None], basis[None, :])
+    np.testing.assert_allclose(gram, np.eye(alg.dim), atol=1e-15)
+    assert np.all(alg.distance(basis) <= 1e-15)
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+@given(seed=seeds)
+def test_projection_is_idempotent_and_orthogonal(key: str, seed: int) -> None:
+    alg = ALGEBRAS[key]()
+    rng = np.random.default_rng(seed)
+    Y = rng.standard_normal((2, *alg.shape))
+    if alg.is_complex:
+        Y = Y + 1j * rng.standard_normal((2, *alg.shape))
+    P = alg.project(Y)
+    assert _rel(alg.project(P), P) <= TOL
+    # the residual is orthogonal to V: <Y - P, e_a> = 0 for every basis element
+    basis = alg.from_coords(np.eye(alg.dim))
+    assert np.max(np.abs(alg.inner(basis[None], (Y - P)[:, None]))) <= 1e-13
+    np.testing.assert_allclose(alg.to_coords(Y), alg.to_coords(P), atol=1e-13)
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+@given(seed=seeds)
+def test_coordinates_round_trip_and_membership(key: str, seed: int) -> None:
+    alg = ALGEBRAS[key]()
+    W = alg.random(seed, batch=(3,))
+    assert np.all(alg.contains(W))
+    np.testing.assert_allclose(alg.from_coords(alg.to_coords(W)), W, atol=1e-14)
+    # a generic perturbation off V is detected
+    off = np.zeros(alg.shape)
+    off[0, 0] = off[0, 1] = 0.1  # neither (skew-)symmetric, (skew-)Hermitian, traceless nor in sp
+    if key in ("glR3", "glC3"):
+        return  # everything is in gl(n)
+    assert not np.any(alg.contains(W + off))
+
+
+@pytest.mark.parametrize("key", LIE)
+@given(seed=seeds)
+def test_bracket_antisymmetry_jacobi_closure(key: str, seed: int) -> None:
+    alg = ALGEBRAS[key]()
+    rng = np.random.default_rng(seed)
+    A, B, C = (alg.random(rng) for _ in range(3))
+    AB = alg.bracket(A, B)
+    assert _rel(AB, -alg.bracket(B, A)) <= TOL
+    jacobi = (
+        alg.bracket(A, alg.bracket(B, C))
+        + alg.bracket(B, alg.bracket(C, A))
+        + alg.bracket(C, alg.bracket(A, B))
+    )
+    assert np.max(np.abs(jacobi)) <= 1e-12 * max(1.0, float(np.max(np.abs(A))) ** 3)
+    assert alg.distance(AB) <= 1e-13 * max(1.0, float(alg.norm(AB)))
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+@given(seed=seeds)
+def test_normalizer_acts_on_V_and_fast_products_match(key: str, seed: int) -> None:
+    """``[N(V), V] in V``, ``B X B`` in the stage space, and the one-product bracket is exact."""
+    alg = ALGEBRAS[key]()
+    rng = np.random.default_rng(seed)
+    X = alg.random(rng, batch=(2,))
+    B = alg.normalizer.random(rng, batch=(2,))
+    C, T = alg.bracket_and_triple(B, X)
+    assert _rel(C, B @ X - X @ B) <= TOL
+    assert _rel(T, B @ X @ B) <= TOL
+    assert np.all(alg.distance(C) <= 1e-13)
+    assert np.all(alg.stage_algebra.distance(T) <= 1e-13 * np.maximum(1, alg.norm(T)))
+
+
+def test_su_stage_lives_in_u_not_su() -> None:
+    """``Tr(B X B) != 0`` on su(n): the IsoMP stage needs u(n) (not stated in the paper)."""
+    alg = iso.algebras.su(3)
+    X = alg.random(1)
+    B = alg.normalizer.random(2)
+    _, T = alg.bracket_and_triple(B, X)
+    assert abs(np.trace(T)) > 1e-3
+    assert alg.stage_algebra.name == "u(3)"
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+@given(seed=seeds)
+def test_inner_product_is_real_frobenius(key: str, seed: int) -> None:
+    alg = ALGEBRAS[key]()
+    rng = np.random.default_rng(seed)
+    A, X = alg.random(rng), alg.random(rng)
+    expected = np.real(np.trace(np.conj(A).T @ X))
+    assert abs(alg.inner(A, X) - expected) <= 1e-13 * max(1.0, abs(expected))
+    assert abs(alg.norm(A) ** 2 - alg.inner(A, A)) <= 1e-12 * alg.inner(A, A)
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+def test_casimirs_invariant_under_similarity_flow(key: str) -> None:
+    """Casimirs do not change along the exact flow of ``[B, W]`` for constant ``B``."""
+    from scipy.linalg import expm
+
+    alg = ALGEBRAS[key]()
+    W = alg.random(3)
+    B = alg.normalizer.random(4)
+    g = expm(0.7 * B)
+    W1 = alg.project(g @ W @ np.linalg.inv(g))
+    c0, c1 = alg.casimirs(W), alg.casimirs(W1)
+    scale = alg.casimir_scale(W)
+    assert np.max(np.abs(c1 - c0) / scale) <= 1e-12
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+def test_random_is_seeded_and_batched(key: str) -> None:
+    alg: Algebra = ALGEBRAS[key]()
+    a = alg.random(7, batch=(4, 2))
+    b = alg.random(7, batch=(4, 2))
+    assert a.shape == (4, 2, *alg.shape) and a.dtype == alg.dtype
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, alg.random(8, batch=(4, 2)))
+
+
+def test_sp_involution_is_J_transpose_J() -> None:
+    alg = iso.algebras.sp(6)
+    Y = np.random.default_rng(0).standard_normal((6, 6))
+    np.testing.assert_array_equal(alg.sigma(Y), alg.J @ Y.T @ alg.J)
+    W = alg.random(1)
+    assert np.max(np.abs(W.T @ alg.J + alg.J @ W)) <= 1e-14
+
+
+@pytest.mark.parametrize(
+    ("factory", "arg"),
+    [(iso.algebras.so, 0), (iso.algebras.so, 2.5), (iso.algebras.sp, 3), (iso.algebras.sp, 0)],
+)
+def test_bad_sizes_raise(factory, arg) -> None:
+    with pytest.raises(ValueError, match=r"size|positive integer"):
+        factory(arg)

@@ -1,0 +1,137 @@
+"""IsoMP on every matrix algebra: isospectrality, staying in V, symmetry, order, Cayley form."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+from helpers import (
+    ALGEBRA_FACTORIES,
+    initial_state,
+    loglog_slope,
+    random_problem,
+    spectrum_backward_error,
+)
+
+H_STEP = 0.05
+N_STEPS = 1000
+
+
+def _initial(prob: iso.IsospectralProblem, seed: int = 1) -> np.ndarray:
+    return initial_state(prob.algebra, seed)
+
+
+@pytest.mark.parametrize("nonlinear", [False, True], ids=["linear", "nonlinear"])
+@pytest.mark.parametrize("key", list(ALGEBRA_FACTORIES))
+def test_isospectral_in_space_over_1000_steps(key: str, nonlinear: bool) -> None:
+    prob = random_problem(key, seed=3, nonlinear=nonlinear)
+    W0 = _initial(prob)
+    sol = iso.solve(prob, iso.IsoMP(), W0, dt=H_STEP, n_steps=N_STEPS, save_every=100)
+    assert sol.success, sol.message
+    W_end = sol.ys[-1]
+    norm0 = float(np.linalg.norm(W0, 2))
+    # the flow really moved the state (else the test would be vacuous)
+    assert np.linalg.norm(W_end - W0) > 1e-2 * np.linalg.norm(W0)
+    assert spectrum_backward_error(W0, W_end) <= 1e-12 * norm0
+    assert float(np.max(sol.diagnostics.max_distance)) <= 1e-13
+    assert float(np.max(sol.diagnostics.casimir_drift)) <= 1e-12
+
+
+@pytest.mark.parametrize("key", list(ALGEBRA_FACTORIES))
+def test_step_is_symmetric(key: str) -> None:
+    prob = random_problem(key, seed=5, nonlinear=True)
+    W0 = _initial(prob, seed=2)
+    h = 0.1
+    W1 = iso.step(prob, iso.IsoMP(), W0, h)
+    W_back = iso.step(prob, iso.IsoMP(), W1, -h)
+    assert float(np.max(np.abs(W_back - W0))) <= 1e-13
+    assert float(np.max(np.abs(W1 - W0))) > 1e-3  # a real step was taken
+
+
+@pytest.mark.parametrize("key", list(ALGEBRA_FACTORIES))
+def test_update_and_cayley_forms_agree_with_step(key: str) -> None:
+    r"""``W1 = W0 + h [B(X), X] = C W0 C^{-1}`` and ``W0 = (I - hB/2) X (I + hB/2)``."""
+    prob = random_problem(key, seed=7, nonlinear=True)
+    W0 = _initial(prob, seed=4)
+    h = 0.1
+    W1, info = iso.step(prob, iso.IsoMP(), W0, h, return_info=True)
+    X = info.stage
+    B = prob.B(X)
+    Id = np.eye(prob.algebra.shape[0])
+    assert float(np.max(np.abs(W0 + h * (B @ X - X @ B) - W1))) <= 1e-14
+    cayley = (Id + 0.5 * h * B) @ np.linalg.inv(Id - 0.5 * h * B)
+    assert float(np.max(np.abs(cayley @ W0 @ np.linalg.inv(cayley) - W1))) <= 1e-13
+    assert float(np.max(np.abs((Id - 0.5 * h * B) @ X @ (Id + 0.5 * h * B) - W0))) <= 1e-14
+    assert float(np.max(np.abs((Id + 0.5 * h * B) @ X @ (Id - 0.5 * h * B) - W1))) <= 1e-14
+
+
+@pytest.mark.parametrize("key", ["so4", "herm3", "sp4"])
+def test_second_order_against_dop853(key: str) -> None:
+    prob = random_problem(key, seed=11, nonlinear=True)
+    W0 = _initial(prob, seed=6)
+    T = 1.0
+    ref = iso.reference_solution(prob, W0, [T], rtol=1e-13, atol=1e-13)[-1]
+    hs = 2.0 ** -np.arange(2, 8)
+    errs = []
+    for h in hs:
+        sol = iso.solve(prob, iso.IsoMP(), W0, dt=h, t1=T, save_every=10**6, diagnostics=False)
+        errs.append(np.linalg.norm(sol.ys[-1] - ref))
+    slope = loglog_slope(hs, np.array(errs))
+    assert abs(slope - 2.0) <= 0.1, (slope, errs)
+    assert errs[-1] > 1e-11  # still far above the reference's accuracy
+
+
+def test_state_stays_in_space_over_1e5_steps() -> None:
+    """Rounding cannot push skew-Hermitian iterates off u(n) (NOTES.md): after 10^5 steps the
+    distance to u(3) is still at rounding level (exactly 0 with the exact projection)."""
+    alg = iso.algebras.u(3)
+    lam = np.array([[1.0, 0.5, 0.3], [0.5, 0.7, 0.2], [0.3, 0.2, 0.4]])  # symmetric weights
+
+    prob = iso.IsospectralProblem(B=lambda W: -lam * W, algebra=alg)  # a u(3) rigid body
+    W0 = initial_state(alg, 2)
+    sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.05, n_steps=100_000, save_every=10_000)
+    assert sol.success
+    assert float(np.max(np.abs(sol.ys[-1] - sol.ys[0]))) > 1e-2  # it moved
+    assert float(np.max(sol.diagnostics.distance)) <= 1e-15
+    # per-step errors of ~1e-15 (solver tolerance, rounding) random-walk over 10^5 steps
+    assert float(np.max(sol.diagnostics.casimir_drift)) <= 1e-11
+
+
+@pytest.mark.parametrize("key", ["so4", "glC3"])
+def test_ensemble_equals_separate_runs(key: str) -> None:
+    prob = random_problem(key, seed=13, nonlinear=True)
+    W0s = prob.algebra.random(21, batch=(3, 2))
+    W0s *= 0.6 / prob.algebra.norm(W0s)[..., None, None]
+    W0s[1, 0] *= 2.0  # members converge at different speeds
+    sol = iso.solve(prob, iso.IsoMP(), W0s, dt=0.1, n_steps=50, save_every=10)
+    assert sol.ys.shape == (6, 3, 2, *prob.algebra.shape)
+    for i in range(3):
+        for j in range(2):
+            single = iso.solve(prob, iso.IsoMP(), W0s[i, j], dt=0.1, n_steps=50, save_every=10)
+            assert float(np.max(np.abs(single.ys - sol.ys[:, i, j]))) <= 1e-13
+    assert sol.diagnostics.casimir_drift.shape == (3, 2)
+
+
+def test_extrapolated_initial_guess_saves_iterations_same_answer() -> None:
+    prob = random_problem("so4", seed=17, nonlinear=True)
+    W0 = _initial(prob)
+    a = iso.solve(prob, iso.IsoMP(initial_guess="state"), W0, dt=0.05, n_steps=200)
+    b = iso.solve(prob, iso.IsoMP(initial_guess="extrapolate"), W0, dt=0.05, n_steps=200)
+    assert float(np.max(np.abs(a.ys - b.ys))) <= 1e-13
+    assert b.stats.iterations_mean < a.stats.iterations_mean
+
+
+def test_classical_midpoint_is_not_isospectral_but_isomp_is() -> None:
+    """The comparison methods drift in the Casimirs where IsoMP does not. (On so(4) both
+    Casimirs are quadratic, which the classical midpoint preserves exactly: use so(5).)"""
+    from helpers import hamiltonian_problem
+
+    prob = hamiltonian_problem(iso.algebras.so(5), seed=19, nonlinear=True)
+    W0 = _initial(prob)
+    iso_sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=300, save_every=10)
+    mid_sol = iso.solve(prob, iso.ClassicalMidpoint(), W0, dt=0.1, n_steps=300, save_every=10)
+    rk_sol = iso.solve(prob, iso.RK4(), W0, dt=0.1, n_steps=300, save_every=10)
+    assert float(iso_sol.diagnostics.casimir_drift) <= 1e-13
+    assert float(mid_sol.diagnostics.casimir_drift) > 1e-6
+    assert float(rk_sol.diagnostics.casimir_drift) > 1e-9

@@ -1,0 +1,169 @@
+"""Bad input gets a typed exception that names the problem."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+from helpers import initial_state
+
+D3 = np.array([[1.0, 1.5, 2.0], [1.5, 2.0, 2.5], [2.0, 2.5, 3.0]])  # rigid-body weights
+
+
+@pytest.fixture
+def so3_problem() -> iso.IsospectralProblem:
+    return iso.IsospectralProblem(B=lambda W: -D3 * W, algebra=iso.algebras.so(3))
+
+
+@pytest.fixture
+def W0() -> np.ndarray:
+    return initial_state(iso.algebras.so(3), 1)
+
+
+def _solve(prob, y0, **kw):
+    kw.setdefault("dt", 0.1)
+    kw.setdefault("t1", 1.0)
+    return iso.solve(prob, iso.IsoMP(), y0, **kw)
+
+
+def test_wrong_shape(so3_problem) -> None:
+    with pytest.raises(iso.ShapeError, match=r"shape \(\*batch, 3, 3\).*got \(3, 4\)"):
+        _solve(so3_problem, np.zeros((3, 4)))
+    with pytest.raises(ValueError, match="shape"):  # also a ValueError
+        _solve(so3_problem, np.zeros(3))
+
+
+def test_wrong_dtype(so3_problem, W0) -> None:
+    with pytest.raises(iso.DtypeError, match=r"complex.*real space"):
+        _solve(so3_problem, W0 + 0j)
+    with pytest.raises(TypeError, match="numeric"):
+        _solve(so3_problem, np.array([["a"] * 3] * 3))
+
+
+def test_integer_input_is_converted(so3_problem) -> None:
+    W = np.array([[0, 1, 0], [-1, 0, 0], [0, 0, 0]])
+    sol = _solve(so3_problem, W)
+    assert sol.ys.dtype == np.float64
+
+
+def test_state_not_in_space_reports_distance(so3_problem, W0) -> None:
+    bad = W0 + 0.01 * np.eye(3)
+    with pytest.raises(iso.NotInSpaceError, match=r"not in so\(3\): distance 1\.73\de-02") as info:
+        _solve(so3_problem, bad)
+    assert info.value.distance == pytest.approx(0.01 * np.sqrt(3))
+
+
+def test_rounding_level_asymmetry_is_accepted_and_projected(so3_problem, W0) -> None:
+    noisy = W0 + 1e-14 * np.arange(9.0).reshape(3, 3)
+    sol = _solve(so3_problem, noisy)
+    assert np.array_equal(sol.ys[0], -sol.ys[0].T)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_state(so3_problem, W0, bad) -> None:
+    W = W0.copy()
+    W[0, 1], W[1, 0] = bad, -bad
+    with pytest.raises(iso.NonFiniteError, match="finite"):
+        _solve(so3_problem, W)
+
+
+@pytest.mark.parametrize("dt", [0.0, -0.1, np.nan, np.inf])
+def test_bad_step(so3_problem, W0, dt) -> None:
+    with pytest.raises(iso.StepSizeError, match="dt must be positive and finite"):
+        _solve(so3_problem, W0, dt=dt)
+
+
+def test_step_rejects_zero_h(so3_problem, W0) -> None:
+    with pytest.raises(iso.StepSizeError, match="nonzero"):
+        iso.step(so3_problem, iso.IsoMP(), W0, 0.0)
+
+
+def test_reversed_time_span(so3_problem, W0) -> None:
+    with pytest.raises(iso.TimeSpanError, match="before t0"):
+        _solve(so3_problem, W0, t0=1.0, t1=0.5)
+
+
+def test_t1_not_a_whole_number_of_steps(so3_problem, W0) -> None:
+    with pytest.raises(iso.StepSizeError, match=r"not a whole number of steps.*choose dt"):
+        _solve(so3_problem, W0, dt=0.3, t1=1.0)
+
+
+def test_time_arguments_must_be_two_of_three(so3_problem, W0) -> None:
+    with pytest.raises(ValueError, match="exactly two of t1, dt and n_steps"):
+        iso.solve(so3_problem, iso.IsoMP(), W0, dt=0.1, t1=1.0, n_steps=10)
+    with pytest.raises(ValueError, match="exactly two"):
+        iso.solve(so3_problem, iso.IsoMP(), W0, dt=0.1)
+    with pytest.raises(iso.StepSizeError, match="n_steps"):
+        iso.solve(so3_problem, iso.IsoMP(), W0, dt=0.1, n_steps=2.5)
+    with pytest.raises(ValueError, match="save_every"):
+        iso.solve(so3_problem, iso.IsoMP(), W0, dt=0.1, n_steps=3, save_every=0)
+
+
+def test_B_wrong_shape(W0) -> None:
+    prob = iso.IsospectralProblem(B=lambda W: W[..., :2, :2], algebra=iso.algebras.so(3))
+    with pytest.raises(iso.InvalidBError, match=r"B returned shape \(2, 2\), expected \(3, 3\)"):
+        _solve(prob, W0)
+
+
+def test_B_outside_normalizer(W0) -> None:
+    prob = iso.IsospectralProblem(B=lambda W: W @ W, algebra=iso.algebras.so(3))  # symmetric
+    with pytest.raises(iso.InvalidBError, match=r"not in the normalizer so\(3\).*distance"):
+        _solve(prob, W0)
+    herm = iso.algebras.herm(2)
+    prob = iso.IsospectralProblem(B=lambda W: W, algebra=herm)  # Hermitian, not in u(2)
+    with pytest.raises(iso.InvalidBError, match=r"normalizer u\(2\)"):
+        _solve(prob, herm.random(0))
+
+
+def test_B_non_finite_or_complex(W0) -> None:
+    prob = iso.IsospectralProblem(B=lambda W: W * np.nan, algebra=iso.algebras.so(3))
+    with pytest.raises(iso.InvalidBError, match="non-finite"):
+        _solve(prob, W0)
+    prob = iso.IsospectralProblem(B=lambda W: W + 0j, algebra=iso.algebras.so(3))
+    with pytest.raises(iso.InvalidBError, match="complex"):
+        _solve(prob, W0)
+
+
+def test_B_raising_is_wrapped_with_cause(W0) -> None:
+    def B(W):
+        raise KeyError("oops")
+
+    prob = iso.IsospectralProblem(B=B, algebra=iso.algebras.so(3))
+    with pytest.raises(iso.InvalidBError, match="B raised KeyError") as info:
+        _solve(prob, W0)
+    assert isinstance(info.value.__cause__, KeyError)
+
+
+def test_B_going_nan_mid_run_is_reported(W0) -> None:
+    calls = {"n": 0}
+
+    def B(W):
+        calls["n"] += 1
+        return -D3 * W if calls["n"] < 20 else W * np.nan
+
+    prob = iso.IsospectralProblem(B=B, algebra=iso.algebras.so(3))
+    with pytest.raises(iso.ConvergenceError, match="non_finite") as info:
+        _solve(prob, W0)
+    assert info.value.reason == "non_finite" and info.value.step > 0
+
+
+def test_problem_construction_checks_types() -> None:
+    with pytest.raises(TypeError, match="callable"):
+        iso.IsospectralProblem(B=3, algebra=iso.algebras.so(3))  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="Algebra"):
+        iso.IsospectralProblem(B=lambda W: W, algebra="so3")  # type: ignore[arg-type]
+
+
+def test_all_errors_share_the_base_class() -> None:
+    for cls in (
+        iso.ShapeError,
+        iso.DtypeError,
+        iso.NonFiniteError,
+        iso.NotInSpaceError,
+        iso.InvalidBError,
+        iso.StepSizeError,
+        iso.TimeSpanError,
+        iso.ConvergenceError,
+    ):
+        assert issubclass(cls, iso.IsoflowError)
