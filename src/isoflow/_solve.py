@@ -155,6 +155,20 @@ def _failure_message(method: Method, res: StepResult, k: int, t: float) -> str:
     )
 
 
+def _failure_exception(method: Method, res: StepResult, k: int, t: float) -> Exception:
+    """The exception describing a rejected step ``k`` that started at time ``t``."""
+    if not res.success:
+        return ConvergenceError(
+            _failure_message(method, res, k, t),
+            step=k,
+            time=t,
+            residual=float(np.max(res.residual)) if res.residual is not None else float("nan"),
+            iterations=int(np.max(res.iterations)) if res.iterations is not None else 0,
+            reason=res.failure_reason(),
+        )
+    return NonFiniteError(f"{method.name}: the state became non-finite at step {k} (t = {t:.6g})")
+
+
 def step(
     problem: IsospectralProblem,
     method: Method,
@@ -195,17 +209,8 @@ def step(
     if validate:
         problem.check_B(W)
     res = method.step(problem, W, h, method.init(problem, W, h))
-    if not res.success:
-        raise ConvergenceError(
-            _failure_message(method, res, 0, 0.0),
-            step=0,
-            time=0.0,
-            residual=float(np.max(res.residual)) if res.residual is not None else float("nan"),
-            iterations=int(np.max(res.iterations)) if res.iterations is not None else 0,
-            reason=res.failure_reason(),
-        )
-    if not np.all(np.isfinite(res.y)):
-        raise NonFiniteError(f"{method.name} produced non-finite values in one step of h = {h}")
+    if not res.success or not np.all(np.isfinite(res.y)):
+        raise _failure_exception(method, res, 0, 0.0)
     return (res.y, res) if return_info else res.y
 
 
@@ -267,12 +272,11 @@ def solve(
     i_save = 1
 
     state = method.init(problem, W, dt_)
-    total_iter = 0
-    max_iter = 0
+    total_iter = max_iter = 0
     max_res = 0.0
     status, message = STATUS_FINISHED, f"{n} steps of dt = {dt_:g} completed"
     start = time.perf_counter()
-    k = 0
+    k = 0  # steps accepted so far
     bar = tqdm(
         total=n,
         disable=(None if progress is None else not progress),
@@ -282,47 +286,30 @@ def solve(
         leave=False,
     )
     try:
-        for k in range(n):
-            t = t0 + k * dt_
-            res = method.step(problem, W, dt_, state)
-            if res.iterations is not None:
-                total_iter += int(np.sum(res.iterations))
-                max_iter = max(max_iter, int(np.max(res.iterations)))
-            if res.residual is not None and np.all(np.isfinite(res.residual)):
-                max_res = max(max_res, float(np.max(res.residual)))
-            failure: Exception | None = None
-            if not res.success:
-                failure = ConvergenceError(
-                    _failure_message(method, res, k, t),
-                    step=k,
-                    time=t,
-                    residual=float(np.max(res.residual)) if res.residual is not None else 0.0,
-                    iterations=int(np.max(res.iterations)) if res.iterations is not None else 0,
-                    reason=res.failure_reason(),
-                )
-            elif not np.all(np.isfinite(res.y)):
-                failure = NonFiniteError(
-                    f"{method.name}: the state became non-finite at step {k} (t = {t:.6g})"
-                )
-            if failure is not None:
+        while k < n:
+            chunk = min(save_every - k % save_every, n - k)
+            adv = method.advance(problem, W, dt_, chunk, state)
+            total_iter += adv.iterations_total
+            max_iter = max(max_iter, adv.iterations_max)
+            max_res = max(max_res, adv.residual_max)
+            W, state = adv.y, adv.state
+            k += adv.n_done
+            bar.update(adv.n_done)
+            if adv.failure is not None:
+                failure = _failure_exception(method, adv.failure, k, t0 + k * dt_)
                 if throw:
                     raise failure
                 status, message = STATUS_FAILED, str(failure)
-                if ts[i_save - 1] != t:  # keep the last good state
-                    ys[i_save], ts[i_save] = W, t
+                if ts[i_save - 1] != t0 + k * dt_:  # keep the last good state
+                    ys[i_save], ts[i_save] = W, t0 + k * dt_
                     i_save += 1
                 break
-            W, state = res.y, res.state
-            if (k + 1) % save_every == 0 or k + 1 == n:
-                ys[i_save], ts[i_save] = W, t0 + (k + 1) * dt_
-                i_save += 1
-            bar.update(1)
-        else:
-            k = n
+            ys[i_save], ts[i_save] = W, t0 + k * dt_
+            i_save += 1
     finally:
         bar.close()
     wall = time.perf_counter() - start
-    n_done = k if status == STATUS_FAILED else n
+    n_done = k
     members = max(int(np.prod(alg.batch_shape(W))), 1)
     stats = SolveStats(
         n_steps=n_done,
