@@ -86,7 +86,9 @@ class Method:
     """Base of the integrators: a small frozen dataclass with ``init`` and ``step``.
 
     A method advances ``problem`` by one fixed step ``h`` with :meth:`step`; the solve loop owns
-    everything else (saving, diagnostics, failure policy). ``state`` is opaque to the loop.
+    everything else (saving, diagnostics, failure policy). ``state`` is opaque to the loop, but
+    must be ``None`` or a tuple of floats and NumPy arrays, so that a run can be checkpointed and
+    resumed bit for bit (e.g. IsoMP's warm start ``(h, X_k - W_k)``).
 
     Attributes
     ----------
