@@ -176,5 +176,5 @@ def test_sp_involution_is_J_transpose_J() -> None:
     [(iso.algebras.so, 0), (iso.algebras.so, 2.5), (iso.algebras.sp, 3), (iso.algebras.sp, 0)],
 )
 def test_bad_sizes_raise(factory, arg) -> None:
-    with pytest.raises(ValueError, match=r"size|positive integer"):
+    with pytest.raises(iso.ParameterError, match=r"size|positive integer"):
         factory(arg)

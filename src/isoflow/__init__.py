@@ -19,6 +19,7 @@ from ._errors import InvalidBError as InvalidBError
 from ._errors import IsoflowError as IsoflowError
 from ._errors import NonFiniteError as NonFiniteError
 from ._errors import NotInSpaceError as NotInSpaceError
+from ._errors import ParameterError as ParameterError
 from ._errors import ShapeError as ShapeError
 from ._errors import StepSizeError as StepSizeError
 from ._errors import TimeSpanError as TimeSpanError
@@ -57,6 +58,7 @@ __all__ = [
     "Newton",
     "NonFiniteError",
     "NotInSpaceError",
+    "ParameterError",
     "ShapeError",
     "Solution",
     "SolveStats",

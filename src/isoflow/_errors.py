@@ -14,6 +14,7 @@ __all__ = [
     "IsoflowError",
     "NonFiniteError",
     "NotInSpaceError",
+    "ParameterError",
     "ShapeError",
     "StepSizeError",
     "TimeSpanError",
@@ -51,6 +52,10 @@ class NotInSpaceError(IsoflowError, ValueError):
         super().__init__(message)
         self.distance = distance
         self.tolerance = tolerance
+
+
+class ParameterError(IsoflowError, ValueError):
+    """A model, space or method parameter is out of range or malformed (e.g. ``n < 1``)."""
 
 
 class InvalidBError(IsoflowError, ValueError):

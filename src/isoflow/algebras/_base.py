@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from .._errors import DtypeError, NonFiniteError, NotInSpaceError, ShapeError
+from .._errors import DtypeError, NonFiniteError, NotInSpaceError, ParameterError, ShapeError
 
 __all__ = ["Algebra", "MatrixAlgebra"]
 
@@ -300,7 +300,7 @@ class MatrixAlgebra(Algebra):
 
     def __init__(self, n: int, dtype: Any, name: str) -> None:
         if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
-            raise ValueError(f"matrix size n must be a positive integer, got {n!r}")
+            raise ParameterError(f"matrix size n must be a positive integer, got {n!r}")
         self.n = int(n)
         self.shape = (self.n, self.n)
         self.dtype = np.dtype(dtype)

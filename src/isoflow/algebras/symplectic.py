@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._errors import ParameterError
 from ._base import MatrixAlgebra
 
 __all__ = ["Symplectic", "sl2", "sp"]
@@ -28,7 +29,7 @@ class Symplectic(MatrixAlgebra):
 
     def __init__(self, size: int, name: str | None = None) -> None:
         if not isinstance(size, (int, np.integer)) or size < 2 or size % 2:
-            raise ValueError(f"sp(2m) needs an even matrix size >= 2, got {size!r}")
+            raise ParameterError(f"sp(2m) needs an even matrix size >= 2, got {size!r}")
         super().__init__(size, np.float64, name or f"sp({size})")
         self.m = size // 2
         m = self.m

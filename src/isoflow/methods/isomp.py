@@ -98,9 +98,13 @@ class IsoMP(Method):
                 dB = problem.evaluate_B_jvp(X, dX)
                 # d(BXB) = dB X B + B X dB + B dX B; the first two by polarization of the
                 # quadratic map B -> B X B, with dB rescaled to the size of B for accuracy.
-                nb = np.maximum(alg.normalizer.norm(B), np.finfo(float).tiny)
-                nd = np.maximum(alg.normalizer.norm(dB), np.finfo(float).tiny)
-                s = (nb / nd).reshape(nb.shape + (1,) * alg.core_ndim)
+                nb = alg.normalizer.norm(B)
+                nd = alg.normalizer.norm(dB)
+                # s = ||B|| / ||dB||, and 1 where either vanishes (then dB X B + B X dB = 0
+                # exactly or B = 0): never inf * 0
+                ok = (nd > 0) & (nb > 0)
+                s = np.where(ok, nb / np.where(ok, nd, 1.0), 1.0)
+                s = s.reshape(nb.shape + (1,) * alg.core_ndim)
                 _, Tp = alg.bracket_and_triple(B + s * dB, X)
                 _, Tm = alg.bracket_and_triple(B - s * dB, X)
                 C1, _ = alg.bracket_and_triple(dB, X)

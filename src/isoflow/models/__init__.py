@@ -1,3 +1,19 @@
 """The physical systems of the paper, each a function returning ``(problem, initial_state)``."""
 
-__all__: list[str] = []
+from .._errors import ParameterError as ParameterError
+from .brockett import brockett as brockett
+from .rigid_body import rigid_body as rigid_body
+from .toda import jacobi_coefficients as jacobi_coefficients
+from .toda import jacobi_matrix as jacobi_matrix
+from .toda import off_band as off_band
+from .toda import toda as toda
+
+__all__: list[str] = [
+    "ParameterError",
+    "brockett",
+    "jacobi_coefficients",
+    "jacobi_matrix",
+    "off_band",
+    "rigid_body",
+    "toda",
+]
