@@ -8,21 +8,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import isoflow as iso
+from helpers import ALGEBRA_FACTORIES, LIE_KEYS
 from isoflow.algebras import Algebra
 
-ALGEBRAS = {
-    "so4": lambda: iso.algebras.so(4),
-    "u3": lambda: iso.algebras.u(3),
-    "su3": lambda: iso.algebras.su(3),
-    "sym4": lambda: iso.algebras.sym(4),
-    "herm3": lambda: iso.algebras.herm(3),
-    "sp4": lambda: iso.algebras.sp(4),
-    "sl2": lambda: iso.algebras.sl2(),
-    "glR3": lambda: iso.algebras.gl(3),
-    "glC3": lambda: iso.algebras.gl(3, complex=True),
-}
-#: The spaces that are Lie algebras themselves (V = its own normalizer, up to the centre).
-LIE = ["so4", "u3", "su3", "sp4", "sl2", "glR3", "glC3"]
+ALGEBRAS = ALGEBRA_FACTORIES
+LIE = list(LIE_KEYS)
 
 EXPECTED_DIM = {
     "so4": 6,
