@@ -23,6 +23,7 @@ from ._errors import ParameterError as ParameterError
 from ._errors import ShapeError as ShapeError
 from ._errors import StepSizeError as StepSizeError
 from ._errors import TimeSpanError as TimeSpanError
+from ._errors import UnsupportedAlgebraError as UnsupportedAlgebraError
 from ._solve import Solution as Solution
 from ._solve import SolveStats as SolveStats
 from ._solve import solve as solve
@@ -32,6 +33,7 @@ from .methods import RK4 as RK4
 from .methods import ClassicalMidpoint as ClassicalMidpoint
 from .methods import IsoMP as IsoMP
 from .methods import Method as Method
+from .methods import SphericalMidpoint as SphericalMidpoint
 from .methods import StepResult as StepResult
 from .nonlinear import FixedPoint as FixedPoint
 from .nonlinear import Newton as Newton
@@ -42,6 +44,7 @@ try:
     __version__ = version("isoflow")
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
+
 
 __all__ = [
     "RK4",
@@ -62,9 +65,11 @@ __all__ = [
     "ShapeError",
     "Solution",
     "SolveStats",
+    "SphericalMidpoint",
     "StepResult",
     "StepSizeError",
     "TimeSpanError",
+    "UnsupportedAlgebraError",
     "__version__",
     "algebras",
     "models",

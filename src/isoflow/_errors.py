@@ -18,6 +18,7 @@ __all__ = [
     "ShapeError",
     "StepSizeError",
     "TimeSpanError",
+    "UnsupportedAlgebraError",
 ]
 
 
@@ -56,6 +57,10 @@ class NotInSpaceError(IsoflowError, ValueError):
 
 class ParameterError(IsoflowError, ValueError):
     """A model, space or method parameter is out of range or malformed (e.g. ``n < 1``)."""
+
+
+class UnsupportedAlgebraError(IsoflowError, TypeError):
+    """A method was applied to a problem on a space it is not defined for."""
 
 
 class InvalidBError(IsoflowError, ValueError):

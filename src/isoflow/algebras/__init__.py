@@ -3,6 +3,10 @@
 Every space implements :class:`Algebra`. Constructors::
 
     so(n), u(n), su(n), sym(n), herm(n), sp(2m), sl2(), gl(n, complex=False)
+
+and the compact vector forms of ``so(3)^N`` and ``sl(2,R)^N`` on ``(N, 3)`` arrays::
+
+    so3_vectors(N), sl2_vectors(N)
 """
 
 from ._base import Algebra as Algebra
@@ -13,6 +17,10 @@ from .hermitian import Hermitian as Hermitian
 from .hermitian import herm as herm
 from .orthogonal import SpecialOrthogonal as SpecialOrthogonal
 from .orthogonal import so as so
+from .sl2_vectors import SL2Vectors as SL2Vectors
+from .sl2_vectors import sl2_vectors as sl2_vectors
+from .spin import SpinVectors as SpinVectors
+from .spin import so3_vectors as so3_vectors
 from .symmetric import Symmetric as Symmetric
 from .symmetric import sym as sym
 from .symplectic import Symplectic as Symplectic
@@ -28,15 +36,19 @@ __all__ = [
     "GeneralLinear",
     "Hermitian",
     "MatrixAlgebra",
+    "SL2Vectors",
     "SpecialOrthogonal",
     "SpecialUnitary",
+    "SpinVectors",
     "Symmetric",
     "Symplectic",
     "Unitary",
     "gl",
     "herm",
     "sl2",
+    "sl2_vectors",
     "so",
+    "so3_vectors",
     "sp",
     "su",
     "sym",

@@ -1,9 +1,19 @@
 """Time-stepping methods, one per module; each is a small frozen dataclass."""
 
+from ._base import AdvanceResult as AdvanceResult
 from ._base import Method as Method
 from ._base import StepResult as StepResult
 from .classical_midpoint import ClassicalMidpoint as ClassicalMidpoint
 from .explicit_rk import RK4 as RK4
 from .isomp import IsoMP as IsoMP
+from .spherical_midpoint import SphericalMidpoint as SphericalMidpoint
 
-__all__ = ["RK4", "ClassicalMidpoint", "IsoMP", "Method", "StepResult"]
+__all__ = [
+    "RK4",
+    "AdvanceResult",
+    "ClassicalMidpoint",
+    "IsoMP",
+    "Method",
+    "SphericalMidpoint",
+    "StepResult",
+]

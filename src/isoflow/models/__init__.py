@@ -2,7 +2,10 @@
 
 from .._errors import ParameterError as ParameterError
 from .brockett import brockett as brockett
+from .heisenberg_chain import heisenberg_chain as heisenberg_chain
+from .hyperbolic_vortices import hyperbolic_vortices as hyperbolic_vortices
 from .rigid_body import rigid_body as rigid_body
+from .sphere_vortices import sphere_vortices as sphere_vortices
 from .toda import jacobi_coefficients as jacobi_coefficients
 from .toda import jacobi_matrix as jacobi_matrix
 from .toda import off_band as off_band
@@ -11,9 +14,12 @@ from .toda import toda as toda
 __all__: list[str] = [
     "ParameterError",
     "brockett",
+    "heisenberg_chain",
+    "hyperbolic_vortices",
     "jacobi_coefficients",
     "jacobi_matrix",
     "off_band",
     "rigid_body",
+    "sphere_vortices",
     "toda",
 ]
