@@ -125,7 +125,8 @@ def test_off_band_is_small_and_second_order(long_run):
     assert sol.diagnostics.invariant_drift["off_band"] == ob.max()
     # measured 2.1e-3 at h = 0.1 (peak near t = 1.4), then decays with the flow
     assert 1e-4 < ob.max() <= 4e-3
-    assert ob[-1] <= 1e-20
+    # once sorted, the band error has decayed to rounding level (relative to ||L||)
+    assert ob[-1] <= 1e-13 * np.linalg.norm(L0)
     # halving h divides the peak by 4 (measured 5.4e-4 at h = 0.05)
     half = iso.solve(prob, iso.IsoMP(), L0, dt=0.05, t1=10.0)
     ratio = ob.max() / half.diagnostics.invariants["off_band"].max()
