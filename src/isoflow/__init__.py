@@ -13,6 +13,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from . import algebras as algebras
 from . import models as models
+from . import threads as threads
 from ._errors import ConvergenceError as ConvergenceError
 from ._errors import DtypeError as DtypeError
 from ._errors import InvalidBError as InvalidBError
@@ -24,6 +25,8 @@ from ._errors import ShapeError as ShapeError
 from ._errors import StepSizeError as StepSizeError
 from ._errors import TimeSpanError as TimeSpanError
 from ._errors import UnsupportedAlgebraError as UnsupportedAlgebraError
+from ._fast.kernels import ElementwiseLinear as ElementwiseLinear
+from ._fast.kernels import SpinNeighbourSum as SpinNeighbourSum
 from ._solve import Solution as Solution
 from ._solve import SolveStats as SolveStats
 from ._solve import solve as solve
@@ -52,6 +55,7 @@ __all__ = [
     "ConvergenceError",
     "Diagnostics",
     "DtypeError",
+    "ElementwiseLinear",
     "FixedPoint",
     "InvalidBError",
     "IsoMP",
@@ -66,6 +70,7 @@ __all__ = [
     "Solution",
     "SolveStats",
     "SphericalMidpoint",
+    "SpinNeighbourSum",
     "StepResult",
     "StepSizeError",
     "TimeSpanError",
@@ -76,4 +81,5 @@ __all__ = [
     "reference_solution",
     "solve",
     "step",
+    "threads",
 ]

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._errors import InvalidBError
+from ._fast.kernels import ElementwiseLinear, FastKernel, SpinNeighbourSum
 from .algebras import Algebra
 
 __all__ = ["IsospectralProblem"]
@@ -47,6 +48,14 @@ class IsospectralProblem:
         Name used in messages and output files.
     parameters : mapping
         The model parameters, recorded with results.
+    kernel : ElementwiseLinear, SpinNeighbourSum or None
+        Optional compiled description of the *same* ``B`` (see :mod:`isoflow._fast.kernels`):
+        ``ElementwiseLinear(C)`` for :math:`B(W) = C\circ W` on ``so(n)``, ``u(n)``, ``Sym(n)``,
+        ``Herm(n)``; ``SpinNeighbourSum(c)`` for :math:`B_i = c\,(w_{i-1} + w_{i+1})` on
+        :math:`(\mathbb{R}^3,\times)^N`. When set, :class:`~isoflow.IsoMP` and
+        :class:`~isoflow.SphericalMidpoint` with the default fixed-point solver run the whole
+        time loop in compiled code (same answer, same iteration counts as the NumPy path to
+        rounding). ``None`` (default): the general NumPy path.
     """
 
     B: Callable[[Array], Array]
@@ -58,8 +67,16 @@ class IsospectralProblem:
     vectorized: bool = True
     name: str = "isospectral problem"
     parameters: Mapping[str, Any] = field(default_factory=dict)
+    kernel: FastKernel | None = None
 
     def __post_init__(self) -> None:
+        if self.kernel is not None and not isinstance(
+            self.kernel, (ElementwiseLinear, SpinNeighbourSum)
+        ):
+            raise TypeError(
+                "kernel must be an isoflow fast kernel (ElementwiseLinear, SpinNeighbourSum) "
+                f"or None, got {self.kernel!r}"
+            )
         if not callable(self.B):
             raise TypeError(f"B must be callable, got {type(self.B).__name__}")
         if not isinstance(self.algebra, Algebra):
@@ -127,6 +144,15 @@ class IsospectralProblem:
         if not np.all(np.isfinite(out)):
             raise InvalidBError("B returned non-finite values (NaN or Inf)")
         outc = out.astype(norm_alg.dtype, copy=False)
+        if self.kernel is not None:
+            fast = np.asarray(self.kernel.evaluate(W))
+            gap = float(np.max(np.abs(fast - outc))) if fast.shape == outc.shape else np.inf
+            if not gap <= 1e-12 * max(1.0, float(np.max(np.abs(outc)))):
+                raise InvalidBError(
+                    f"the problem's kernel {type(self.kernel).__name__} does not describe its B: "
+                    f"they differ by {gap:.3e} at the initial state (the compiled fast path would "
+                    "integrate a different flow)"
+                )
         dist = norm_alg.distance(outc)
         tol = 1e-12 + rtol * norm_alg.norm(outc)
         if np.any(dist > tol):
@@ -152,6 +178,13 @@ class IsospectralProblem:
         \operatorname{Tr}(A^\dagger X)` (:meth:`Algebra.inner`), ``gradient(W)`` must return
         :math:`\nabla H(W) \in V` and the flow is :math:`\dot W = [\nabla H(W)^\dagger, W]`
         (paper, eq. (2)), i.e. ``B = gradient^dagger``. ``algebra`` must provide ``dagger``.
+
+        The gradient is always taken in ``algebra.inner``. For the vector forms
+        (``so3_vectors``, ``sl2_vectors``) that is the Euclidean dot product, *half* the
+        Frobenius pairing of the matrices: there ``gradient`` is the ordinary gradient and the
+        flow is :math:`\dot w_i = w_i \times \nabla_i H` on :math:`(\mathbb{R}^3,\times)^N`
+        (:math:`\dot w_i = w_i \times_L L \nabla_i H` on :math:`\mathfrak{sl}(2)^N`), twice as
+        fast as the matrix Lie–Poisson flow of the same ``H``.
         """
         dagger = getattr(algebra, "dagger", None)
         if dagger is None:

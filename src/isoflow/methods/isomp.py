@@ -26,6 +26,7 @@ method on ``so(n)``, ``u(n)``, ... and the compact forms on :math:`(\mathbb{R}^3
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -34,16 +35,16 @@ from numpy.typing import NDArray
 
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
-from ._base import Method, StepResult
+from ._base import AdvanceResult, Method, StepResult
 
-__all__ = ["IsoMP"]
+__all__ = ["IsoMP", "extrapolation_weights"]
 
 Array = NDArray[Any]
 
 
 @dataclass(frozen=True)
 class IsoMP(Method):
-    """The isospectral minimal midpoint method.
+    r"""The isospectral minimal midpoint method.
 
     Parameters
     ----------
@@ -51,9 +52,23 @@ class IsoMP(Method):
         Nonlinear solver for the stage ``X`` (default: fixed-point iteration, tolerance
         ``1e-14 ||W_k||``).
     initial_guess : {"extrapolate", "state"}
-        Starting point of the solve. ``"state"`` is ``X = W_k`` (the paper's). ``"extrapolate"``
-        (default) reuses the previous step's stage offset, ``X = W_k + (X_{k-1} - W_{k-1})``,
-        which is ``O(h^2)`` closer and saves iterations; the first step uses ``W_k``.
+        Starting point of the solve. ``"state"`` is ``X = W_k`` (the paper's), an ``O(h)``
+        error. ``"extrapolate"`` (default) extrapolates the stage offset ``D = X - W`` of the
+        last ``p + 1`` steps by the interpolating polynomial of degree ``p`` (see
+        ``extrapolation_order``),
+
+        .. math::
+
+            X^{(0)}_k = W_k + \sum_{q=1}^{p+1} (-1)^{q+1} \binom{p+1}{q} D_{k-q},
+            \qquad D_j = X_j - W_j,
+
+        an ``O(h^{p+2})`` error: with ``p = 3`` the paper's rigid body (``h = 0.1``) needs
+        about 30-40% fewer fixed-point iterations than from ``W_k``. The first steps use the
+        offsets available (none: ``W_k``). The answer is the same fixed point.
+    extrapolation_order : int
+        Polynomial degree ``p`` of the extrapolation, ``0 <= p <= 5`` (default 3; ``0`` reuses
+        the previous offset, ``X = W_k + D_{k-1}``). The method state then carries the last
+        ``p + 1`` offsets: ``(h, D_{k-1}, D_{k-2}, ...)``, newest first.
 
     Examples
     --------
@@ -66,6 +81,7 @@ class IsoMP(Method):
 
     solver: NonlinearSolver = field(default_factory=FixedPoint)
     initial_guess: Literal["extrapolate", "state"] = "extrapolate"
+    extrapolation_order: int = 3
 
     order: ClassVar[int] = 2
     implicit: ClassVar[bool] = True
@@ -78,6 +94,9 @@ class IsoMP(Method):
             )
         if not isinstance(self.solver, NonlinearSolver):
             raise TypeError(f"solver must be FixedPoint() or Newton(), got {self.solver!r}")
+        p = self.extrapolation_order
+        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or not 0 <= p <= 5:
+            raise ValueError(f"extrapolation_order must be an integer in [0, 5], got {p!r}")
 
     def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:
         """The fixed-point problem ``X = G(X)`` of one step from ``W``."""
@@ -118,16 +137,35 @@ class IsoMP(Method):
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
         return None
 
+    def history(self, h: float, state: Any) -> tuple[Array, ...]:
+        """The stored stage offsets ``(D_{k-1}, D_{k-2}, ...)`` usable with step ``h``."""
+        if self.initial_guess != "extrapolate" or state is None or len(state) < 2:
+            return ()
+        if state[0] != h:
+            return ()
+        return tuple(state[1 : self.extrapolation_order + 2])
+
+    def initial_stage(self, y: Array, offsets: tuple[Array, ...]) -> Array:
+        """``X^(0) = W_k + sum_q a_q D_{k-q}`` with the extrapolation weights ``a_q``."""
+        if not offsets:
+            return y
+        a = extrapolation_weights(len(offsets))
+        E = a[0] * offsets[0]
+        for c, D in zip(a[1:], offsets[1:], strict=True):
+            E = E + c * D
+        return y + E
+
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
         alg = problem.algebra
-        X0 = y
-        if self.initial_guess == "extrapolate" and state is not None and state[0] == h:
-            X0 = y + state[1]
+        offsets = self.history(h, state)
+        X0 = self.initial_stage(y, offsets)
         res = self.solver.solve(self.stage_problem(problem, y, h), X0)
         y_next = alg.project(y + h * res.aux)
-        new_state = (h, res.x - y) if self.initial_guess == "extrapolate" else None
+        new_state = None
+        if self.initial_guess == "extrapolate":
+            new_state = (h, res.x - y, *offsets[: self.extrapolation_order])
         return StepResult(
             y=y_next,
             stage=res.x,
@@ -136,3 +174,28 @@ class IsoMP(Method):
             status=res.status,
             state=new_state,
         )
+
+    def advance(
+        self, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any = None
+    ) -> AdvanceResult:
+        r"""Take ``n`` steps; compiled when the problem carries a :class:`FastKernel`.
+
+        With the default :class:`~isoflow.FixedPoint` solver the whole loop runs in compiled
+        code for ``problem.kernel`` = ``ElementwiseLinear`` on ``so(n)``, ``u(n)``,
+        ``Sym(n)``, ``Herm(n)`` (small ``n``), ``SpinNeighbourSum`` on
+        :math:`(\mathbb{R}^3,\times)^N`; single large matrices (``n >= 128``, any ``B``) use
+        preallocated buffers and two BLAS products per iteration. Everything else loops over
+        :meth:`step`. The fast paths follow the same stopping rules, extrapolation and failure
+        semantics, so they return the same :class:`AdvanceResult` (to rounding).
+        """
+        from .._fast import dispatch
+
+        fast = dispatch.isomp_advance(self, problem, y, h, n, state)
+        if fast is not None:
+            return fast
+        return super().advance(problem, y, h, n, state)
+
+
+def extrapolation_weights(m: int) -> tuple[float, ...]:
+    """Weights ``a_q = (-1)^(q+1) binom(m, q)``, ``q = 1..m``, of degree ``m-1`` extrapolation."""
+    return tuple(float((-1) ** (q + 1) * math.comb(m, q)) for q in range(1, m + 1))

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import DtypeError, NonFiniteError, ParameterError, ShapeError
+from .._fast.kernels import ElementwiseLinear
 from ..algebras import herm
 from ..problems import IsospectralProblem
 from ._checks import check_n
@@ -180,6 +181,7 @@ def brockett(
     problem = IsospectralProblem(
         B=B,
         algebra=alg,
+        kernel=ElementwiseLinear(gaps) if nu is not None else None,  # compiled fast path
         B_jvp=lambda W, dW: B(dW),
         lyapunov=lyapunov,
         name=f"Brockett double bracket flow on herm({n})",

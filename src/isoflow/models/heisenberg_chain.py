@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
+from .._fast.kernels import SpinNeighbourSum
 from ..algebras.spin import SpinVectors, dot
 from ..problems import IsospectralProblem
 
@@ -147,6 +148,7 @@ def heisenberg_chain(
     problem = IsospectralProblem(
         B=B,
         algebra=alg,
+        kernel=SpinNeighbourSum(-1.0),  # the same B, for the compiled fast paths
         hamiltonian=hamiltonian,
         B_jvp=B_jvp,
         invariants={"momentum": total_spin},

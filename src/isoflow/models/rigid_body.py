@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError, ShapeError
+from .._fast.kernels import ElementwiseLinear
 from ..algebras import so
 from ..problems import IsospectralProblem
 from ._checks import check_n, real_parameter
@@ -229,6 +230,7 @@ def rigid_body(
     problem = IsospectralProblem(
         B=B,
         algebra=alg,
+        kernel=ElementwiseLinear(-c),  # the same B, for the compiled fast path
         hamiltonian=hamiltonian,
         B_jvp=B_jvp,
         name=f"generalized rigid body on so({n})",

@@ -1,0 +1,241 @@
+"""Selection of a compiled fast path for :meth:`IsoMP.advance` / ``SphericalMidpoint.advance``.
+
+A fast path is taken only when it computes the same thing as the NumPy path: the default
+:class:`~isoflow.FixedPoint` solver (exactly that class), a problem kernel matching the space,
+and the state in the space's dtype. Otherwise these functions return ``None`` and the method
+falls back to its Python loop over ``step``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..algebras.hermitian import Hermitian
+from ..algebras.orthogonal import SpecialOrthogonal
+from ..algebras.spin import SpinVectors
+from ..algebras.symmetric import Symmetric
+from ..algebras.unitary import Unitary
+from ..methods._base import AdvanceResult, StepResult
+from ..nonlinear import FixedPoint
+from ..problems import IsospectralProblem
+from .kernels import ElementwiseLinear, SpinNeighbourSum
+
+if TYPE_CHECKING:
+    from ..methods.isomp import IsoMP
+
+__all__ = ["SMALL_N", "isomp_advance", "sigma_sign", "smm_advance"]
+
+Array = NDArray[Any]
+
+#: Largest ``n`` for which the written-out compiled products beat BLAS calls.
+SMALL_N = 48
+#: Smallest single-matrix ``n`` for the buffered BLAS path (below, the Python loop is as fast).
+LARGE_N = 128
+#: Smallest ensemble for which members are spread over numba threads.
+PARALLEL_MIN_MEMBERS = 32
+#: Smallest ensemble advanced in the blocked member-innermost layout.
+BLOCKED_MIN_MEMBERS = 8
+#: Smallest spin chain spread over numba threads.
+PARALLEL_MIN_SPINS = 200_000
+
+
+def sigma_sign(alg: Any) -> float | None:
+    r"""``s`` with :math:`\sigma(Y) = s\,\bar Y^T` for the four spaces the fast paths know."""
+    t = type(alg)
+    if t is SpecialOrthogonal or t is Unitary:
+        return -1.0
+    if t is Symmetric or t is Hermitian:
+        return 1.0
+    return None
+
+
+def _extrap_table(K: int) -> Array:
+    from ..methods.isomp import extrapolation_weights
+
+    tab = np.zeros((K, K))
+    for m in range(1, K + 1):
+        tab[m - 1, :m] = extrapolation_weights(m)
+    return tab
+
+
+def _threads() -> int:
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def _result(
+    out: dict[str, Any], Wf: Array, batch: tuple[int, ...], core: tuple[int, ...], h: float,
+    keep_state: bool, n_hist_keep: int,
+) -> tuple[Array, Any, StepResult | None]:  # fmt: skip
+    """Reshape a kernel's output into ``(y, state, failure)``."""
+    y = Wf.reshape(*batch, *core)
+    hist = [D.reshape(*batch, *core).copy() for D in out["hist"]][::-1]  # newest first
+    state = (h, *hist[:n_hist_keep]) if keep_state else None
+    failure = None
+    if out["n_done_requested"] != out["n_done"]:
+        failure = StepResult(
+            y=out["y_failed"].reshape(*batch, *core).copy(),
+            stage=out["stage"].reshape(*batch, *core).copy(),
+            iterations=out["iterations"].reshape(batch).copy(),
+            residual=out["residual"].reshape(batch).copy(),
+            status=out["status"].reshape(batch).copy(),
+            state=None,
+        )
+    return y, state, failure
+
+
+def isomp_advance(
+    method: IsoMP, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any
+) -> AdvanceResult | None:
+    """Compiled ``n`` steps of IsoMP, or ``None`` when no fast path applies."""
+    solver = method.solver
+    if type(solver) is not FixedPoint or n < 1:
+        return None
+    alg = problem.algebra
+    kernel = problem.kernel
+    y = np.asarray(y)
+    if y.dtype != alg.dtype:
+        return None
+    batch = alg.batch_shape(y)
+    offsets = method.history(h, state)
+    extrap = method.initial_guess == "extrapolate"
+    K = method.extrapolation_order + 1 if extrap else 1
+    if isinstance(kernel, ElementwiseLinear):
+        s = sigma_sign(alg)
+        if s is None or kernel.coeff.shape != alg.shape:
+            return None
+        if alg.shape[0] > SMALL_N:
+            if batch != ():
+                return None
+            from . import blas
+
+            return blas.isomp_advance_large(method, problem, y, h, n, state)
+        return _dense_elementwise(method, kernel, alg, y, h, n, offsets, K, extrap, s, state)
+    if isinstance(kernel, SpinNeighbourSum) and isinstance(alg, SpinVectors):
+        return spin_advance("isomp", method, kernel, y, h, n, offsets, K, extrap, state)
+    if kernel is None and batch == () and sigma_sign(alg) is not None:
+        if alg.shape[0] >= LARGE_N:
+            from . import blas
+
+            return blas.isomp_advance_large(method, problem, y, h, n, state)
+    return None
+
+
+def smm_advance(
+    method: Any, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any
+) -> AdvanceResult | None:
+    """Compiled ``n`` steps of the spherical midpoint, or ``None`` when no fast path applies.
+
+    ``method`` has ``solver``, ``initial_guess`` (``"extrapolate"`` reuses the previous
+    offset ``M - w``, ``"state"`` starts at ``w``) like :class:`~isoflow.SphericalMidpoint`.
+    """
+    kernel = problem.kernel
+    if type(method.solver) is not FixedPoint or n < 1:
+        return None
+    if not (isinstance(kernel, SpinNeighbourSum) and isinstance(problem.algebra, SpinVectors)):
+        return None
+    y = np.asarray(y)
+    if y.dtype != np.float64:
+        return None
+    extrap = method.initial_guess == "extrapolate"
+    offsets: tuple[Array, ...] = ()
+    if extrap and state is not None and len(state) >= 2 and state[0] == h:
+        offsets = (state[1],)
+    return spin_advance("smm", method, kernel, y, h, n, offsets, 1, extrap, state)
+
+
+def _dense_elementwise(
+    method: IsoMP, kernel: ElementwiseLinear, alg: Any, y: Array, h: float, n: int,
+    offsets: tuple[Array, ...], K: int, extrap: bool, s: float, state: Any,
+) -> AdvanceResult:  # fmt: skip
+    from .dense import advance_elementwise, advance_elementwise_blocked
+
+    solver = method.solver
+    core = alg.shape
+    batch = alg.batch_shape(y)
+    M = int(np.prod(batch)) if batch else 1
+    Wf = np.array(y, dtype=alg.dtype, order="C", copy=True).reshape(M, *core)
+    hist = np.zeros((K, M, *core), dtype=alg.dtype)
+    nh = len(offsets) if extrap else 0
+    for q, D in enumerate(offsets[::-1]):  # oldest .. newest
+        hist[q] = np.asarray(D, dtype=alg.dtype).reshape(M, *core)
+    coeff = np.ascontiguousarray(kernel.coeff)
+    coefs = _extrap_table(K)
+    blocked = M >= BLOCKED_MIN_MEMBERS
+    run = advance_elementwise_blocked if blocked else advance_elementwise
+    out = run(
+        Wf, hist, nh, coefs, coeff, s, h, n, solver.rtol, solver.atol, solver.stall_rtol,
+        solver.divergence_factor, solver.max_iter,
+        parallel=M >= PARALLEL_MIN_MEMBERS and _threads() > 1,
+        extrapolate=extrap,
+    )  # fmt: skip
+    if blocked:
+        Wf = out["y"]
+    out["n_done_requested"] = n
+    y_out, new_state, failure = _result(out, Wf, batch, core, h, extrap, K)
+    return AdvanceResult(
+        y=y_out,
+        state=new_state if out["n_done"] > 0 else state,
+        n_done=out["n_done"],
+        iterations_total=out["iterations_total"],
+        iterations_max=out["iterations_max"],
+        residual_max=out["residual_max"],
+        failure=failure,
+    )
+
+
+def spin_advance(
+    kind: str, method: Any, kernel: SpinNeighbourSum, y: Array, h: float, n: int,
+    offsets: tuple[Array, ...], K: int, extrap: bool, state: Any,
+) -> AdvanceResult:  # fmt: skip
+    """Compiled ``n`` steps of IsoMP (``kind="isomp"``) or the spherical midpoint (``"smm"``)."""
+    from .spin import advance_spin
+
+    solver = method.solver
+    N = y.shape[-2]
+    batch = y.shape[:-2]
+    M = int(np.prod(batch)) if batch else 1
+    par = N >= PARALLEL_MIN_SPINS and _threads() > 1
+    W = np.ascontiguousarray(np.swapaxes(y.reshape(M, N, 3), -1, -2), dtype=np.float64)
+    if W is y:
+        W = W.copy()
+    hist = np.empty((K + 1, M, 3, N))  # slots are written before they are read
+    nh = len(offsets) if extrap else 0
+    for q, D in enumerate(offsets[::-1]):
+        hist[q] = np.swapaxes(np.asarray(D, dtype=np.float64).reshape(M, N, 3), -1, -2)
+    coefs = _extrap_table(K)
+    out = advance_spin(
+        kind, W, hist, nh, extrap, coefs, kernel.coupling, h, n, solver.rtol, solver.atol,
+        solver.stall_rtol, solver.divergence_factor, solver.max_iter, par,
+    )  # fmt: skip
+
+    def back(A: Array) -> Array:
+        return np.ascontiguousarray(np.swapaxes(A, -1, -2)).reshape(*batch, N, 3)
+
+    y_out = back(out["y"])
+    failure = None
+    if out["n_done"] != n:
+        failure = StepResult(
+            y=back(out["y_failed"]),
+            stage=back(out["stage"]),
+            iterations=out["iterations"].reshape(batch).copy(),
+            residual=out["residual"].reshape(batch).copy(),
+            status=out["status"].reshape(batch).copy(),
+            state=None,
+        )
+    new_state = state
+    if out["n_done"] > 0:
+        new_state = (h, *[back(D) for D in out["hist"][::-1]]) if extrap else None
+    return AdvanceResult(
+        y=y_out,
+        state=new_state,
+        n_done=out["n_done"],
+        iterations_total=out["iterations_total"],
+        iterations_max=out["iterations_max"],
+        residual_max=out["residual_max"],
+        failure=failure,
+    )
