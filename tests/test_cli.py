@@ -44,3 +44,9 @@ def test_user_mistakes_give_one_line_errors(args: list[str], code: int, pattern:
 def test_version() -> None:
     out = _run("--version")
     assert out.returncode == 0 and out.stdout.startswith("isoflow ")
+
+
+def test_bench_is_wired_to_the_benchmark_suite() -> None:
+    out = _run("bench", "--help")
+    assert out.returncode == 0
+    assert out.stdout.startswith("usage: isoflow bench")

@@ -48,6 +48,9 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
+from . import experiments as experiments
+from . import io as io
+from . import registry as registry
 
 __all__ = [
     "RK4",
@@ -77,8 +80,11 @@ __all__ = [
     "UnsupportedAlgebraError",
     "__version__",
     "algebras",
+    "experiments",
+    "io",
     "models",
     "reference_solution",
+    "registry",
     "solve",
     "step",
     "threads",

@@ -5,18 +5,18 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm.auto import tqdm
 
 from ._errors import ConvergenceError, NonFiniteError, StepSizeError, TimeSpanError
-from .diagnostics import Diagnostics, compute_diagnostics
+from .diagnostics import Diagnostics, DiagnosticsAccumulator, compute_diagnostics
 from .methods import Method, StepResult
 from .problems import IsospectralProblem
 
-__all__ = ["Solution", "SolveStats", "solve", "step"]
+__all__ = ["Solution", "SolveStats", "StreamWriter", "solve", "step"]
 
 Array = NDArray[Any]
 
@@ -94,6 +94,34 @@ class Solution:
     def y_final(self) -> Array:
         """The last saved state (the final state when ``success``)."""
         return self.ys[-1]
+
+
+@runtime_checkable
+class StreamWriter(Protocol):
+    """What :func:`solve` needs from a streaming writer (e.g. :class:`isoflow.io.HDF5Writer`).
+
+    The solve loop buffers at most ``chunk_rows`` saved states (or ``flush_seconds`` of work),
+    then calls :meth:`append` with them and :meth:`checkpoint` with the step index, state and
+    method state of the last of them; the writer makes both durable together, so what it holds
+    is always a consistent (saved states, last state, method state, step) set. The initial state
+    is appended and checkpointed at once. :meth:`close` ends the run (also after a failure or an
+    interrupt, after the last good states were appended).
+    """
+
+    chunk_rows: int
+    flush_seconds: float
+
+    def open(self, meta: dict[str, Any]) -> None:
+        """Start a run described by ``meta`` (times, method, algebra; JSON-ready)."""
+
+    def append(self, ts: Array, ys: Array, series: dict[str, Array]) -> None:
+        """Saved states ``ys`` at ``ts`` (time first) and their diagnostic ``series``."""
+
+    def checkpoint(self, step: int, y: Array, method_state: Any) -> None:
+        """The state after ``step`` steps (the last appended one) and the method state."""
+
+    def close(self, info: dict[str, Any]) -> None:
+        """End the run; ``info`` holds the status, message and :class:`SolveStats`."""
 
 
 def _time_grid(
@@ -227,6 +255,7 @@ def solve(
     diagnostics: bool = True,
     progress: bool | None = None,
     throw: bool = True,
+    writer: StreamWriter | None = None,
 ) -> Solution:
     r"""Integrate ``problem`` from ``y0`` with a fixed step (no adaptivity, by design).
 
@@ -252,6 +281,13 @@ def solve(
     throw : bool
         If a step fails, raise :class:`ConvergenceError` (default) or return the solution so
         far with ``success=False``; its last saved state is the last good state.
+    writer : StreamWriter or None
+        Stream the saved states, their diagnostics and checkpoints to ``writer`` (e.g.
+        ``iso.io.HDF5Writer("run.h5")``) in chunks instead of holding them: memory stays bounded
+        in the number of steps. The returned :class:`Solution` then holds only two saved states,
+        the initial and the final one (``sol.ys[-1]`` is the final state), and its
+        ``diagnostics`` has the drifts over *all* saved states (computed incrementally) with the
+        time series of those two states only; the full series are in the writer's output.
 
     Returns
     -------
@@ -264,6 +300,24 @@ def solve(
     alg = problem.algebra
     W = alg.validate(y0, "y0")
     problem.check_B(W)
+    if writer is not None:
+        return _solve_streaming(
+            problem,
+            method,
+            W,
+            method.init(problem, W, dt_),
+            k0=0,
+            n=n,
+            t0=float(t0),
+            dt=dt_,
+            save_every=save_every,
+            progress=progress,
+            throw=throw,
+            writer=writer,
+            accumulator=DiagnosticsAccumulator(problem),
+            diagnostics=diagnostics,
+            fresh=True,
+        )
 
     n_save = n // save_every + 1 + (1 if n % save_every else 0)
     ys = np.empty((n_save, *W.shape), dtype=alg.dtype)
@@ -331,5 +385,155 @@ def solve(
         diagnostics=diag,
         t0=float(t0),
         dt=dt_,
+        n_steps=n,
+    )
+
+
+def _solve_streaming(
+    problem: IsospectralProblem,
+    method: Method,
+    W: Array,
+    state: Any,
+    *,
+    k0: int,
+    n: int,
+    t0: float,
+    dt: float,
+    save_every: int,
+    progress: bool | None,
+    throw: bool,
+    writer: StreamWriter,
+    accumulator: DiagnosticsAccumulator,
+    diagnostics: bool,
+    fresh: bool,
+) -> Solution:
+    """The solve loop writing to ``writer``: steps ``k0 .. n`` from ``W`` (after ``k0`` steps).
+
+    ``fresh`` runs open the writer and write the initial state; a resumed run (``fresh=False``)
+    continues a writer that already holds the states up to step ``k0``, whose diagnostics
+    ``accumulator`` has absorbed. The per-step arithmetic is that of :func:`solve`, and the
+    ``advance`` calls cover the same step ranges (between saves), so a resumed run reproduces an
+    uninterrupted one bit for bit.
+    """
+    alg = problem.algebra
+    buf_t: list[float] = []
+    buf_y: list[Array] = []
+    last_flush = time.monotonic()
+    last_written = (k0, W, state)
+
+    def flush(k: int, y: Array, st: Any) -> None:
+        nonlocal last_flush, last_written
+        if buf_y:
+            ts_c = np.asarray(buf_t, dtype=float)
+            ys_c = np.stack(buf_y)
+            series = accumulator.update(ts_c, ys_c)
+            writer.append(ts_c, ys_c, series)
+            writer.checkpoint(k, y, st)
+            buf_t.clear()
+            buf_y.clear()
+            last_written = (k, y, st)
+        last_flush = time.monotonic()
+
+    W_first = W
+    if fresh:
+        writer.open(
+            {
+                "t0": t0,
+                "dt": dt,
+                "n_steps": n,
+                "save_every": save_every,
+                "method": method.name,
+                "algebra": alg.name,
+                "state_shape": list(W.shape),
+                "state_dtype": np.dtype(alg.dtype).str,
+                "casimir_scale": np.asarray(alg.casimir_scale(W), dtype=float).tolist(),
+            }
+        )
+        buf_t.append(t0)
+        buf_y.append(W)
+        flush(0, W, state)
+    total_iter = max_iter = 0
+    max_res = 0.0
+    status, message = STATUS_FINISHED, f"{n} steps of dt = {dt:g} completed"
+    start = time.perf_counter()
+    k = k0
+    bar = tqdm(
+        total=n,
+        initial=k0,
+        disable=(None if progress is None else not progress),
+        delay=1.0,
+        desc=method.name,
+        unit="step",
+        leave=False,
+    )
+    try:
+        while k < n:
+            chunk = min(save_every - k % save_every, n - k)
+            adv = method.advance(problem, W, dt, chunk, state)
+            total_iter += adv.iterations_total
+            max_iter = max(max_iter, adv.iterations_max)
+            max_res = max(max_res, adv.residual_max)
+            W, state = adv.y, adv.state
+            k += adv.n_done
+            bar.update(adv.n_done)
+            if adv.failure is not None:
+                failure = _failure_exception(method, adv.failure, k, t0 + k * dt)
+                status, message = STATUS_FAILED, str(failure)
+                if adv.n_done:  # keep the last good state
+                    buf_t.append(t0 + k * dt)
+                    buf_y.append(W)
+                if throw:
+                    raise failure
+                break
+            buf_t.append(t0 + k * dt)
+            buf_y.append(W)
+            if len(buf_y) >= writer.chunk_rows or (
+                time.monotonic() - last_flush >= writer.flush_seconds
+            ):
+                flush(k, W, state)
+    except BaseException as exc:
+        if status == STATUS_FINISHED:
+            status, message = STATUS_FAILED, f"interrupted: {type(exc).__name__}: {exc}"
+        raise
+    finally:
+        bar.close()
+        wall = time.perf_counter() - start
+        if buf_y:
+            # the buffered states are all good; the last of them is the current (k, W, state)
+            flush(k, W, state)
+        n_done = k - k0
+        members = max(int(np.prod(alg.batch_shape(W))), 1)
+        stats = SolveStats(
+            n_steps=k,
+            n_B_evaluations=total_iter,
+            iterations_mean=total_iter / max(n_done + (status == STATUS_FAILED), 1) / members,
+            iterations_max=max_iter,
+            residual_max=max_res,
+            wall_time=wall,
+        )
+        writer.close(
+            {
+                "status": status,
+                "message": message,
+                "steps_done": last_written[0],
+                "stats": stats.as_dict(),
+            }
+        )
+    t_last = t0 + last_written[0] * dt
+    t_first = t0 + k0 * dt
+    if k == k0:
+        ts, ys = np.array([t_first]), np.stack([W_first])
+    else:
+        ts, ys = np.array([t_first, t_last]), np.stack([W_first, last_written[1]])
+    return Solution(
+        ts=ts,
+        ys=ys,
+        stats=stats,
+        success=status == STATUS_FINISHED,
+        status=status,
+        message=message,
+        diagnostics=accumulator.result() if diagnostics else None,
+        t0=t0,
+        dt=dt,
         n_steps=n,
     )
