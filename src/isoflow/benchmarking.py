@@ -234,7 +234,7 @@ def bench_large_dense(quick: bool) -> list[dict[str, Any]]:
                 d = np.linspace(0.5, 1.5, n)
                 C = -(d[:, None] + d[None, :]) / 2
                 prob = iso.IsospectralProblem(
-                    B=lambda W, C=C: C * W, algebra=alg, kernel=ElementwiseLinear(C)
+                    B=ElementwiseLinear(C).evaluate, algebra=alg, kernel=ElementwiseLinear(C)
                 )
                 W0 = alg.random(seed=1, scale=1.0 / n)
                 m = iso.IsoMP()

@@ -111,6 +111,7 @@ def _pack_state(state: Any) -> tuple[bytes, bytes]:
         if item is None:
             desc.append({"kind": "none"})
             continue
+        entry: dict[str, Any]
         if isinstance(item, bool | np.bool_):
             raw, entry = bytes([int(item)]), {"kind": "bool"}
         elif isinstance(item, int | np.integer):

@@ -210,7 +210,7 @@ def plot_run(run: Any) -> Figure:
     else:
         axes[2].plot(ts, np.asarray(s["distance"]).reshape(len(ts), -1), lw=0.8)
     Y = np.real(run.ys).reshape(len(ts), -1)
-    pick = np.flatnonzero(np.std(Y, axis=0) > 0)[:6] if Y.size else []
+    pick: Any = np.flatnonzero(np.std(Y, axis=0) > 0)[:6] if Y.size else []
     for j in pick:
         axes[3].plot(ts, Y[:, j], lw=0.8, label=f"y[{j}]")
     axes[3].set_title("state components (first six that move)")

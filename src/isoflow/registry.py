@@ -213,5 +213,7 @@ def build(config: dict[str, Any]) -> tuple[IsospectralProblem, Any, Method, dict
     spec = MODELS[cfg["model"]]
     problem, y0 = spec.func(**cfg["params"])
     method = METHODS[cfg["method"]](SOLVERS[cfg["solver"]](cfg["rtol"]))
-    kwargs = {k: cfg[k] for k in ("t0", "dt", "t1", "n_steps", "save_every") if k in cfg}
+    kwargs: dict[str, Any] = {
+        k: cfg[k] for k in ("t0", "dt", "t1", "n_steps", "save_every") if k in cfg
+    }
     return problem, np.asarray(y0), method, kwargs

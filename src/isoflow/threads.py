@@ -75,7 +75,7 @@ def thread_limits(blas: int | None = None, numba: int | None = None) -> Iterator
     from threadpoolctl import threadpool_limits
 
     cores = available_cores()
-    max_numba = int(nb.config.NUMBA_NUM_THREADS)
+    max_numba = int(nb.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     if blas is None and numba is None:
         blas = 1
     if blas is None:

@@ -24,6 +24,7 @@ These loops are for small ``n`` (written-out products, no BLAS); large ``n`` goe
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -252,7 +253,7 @@ def advance_elementwise(
     max_iter: int,
     parallel: bool,
     extrapolate: bool = True,
-) -> dict[str, object]:
+) -> dict[str, Any]:
     """Advance the stacked members ``W`` (``(M, n, n)``, modified in place) by ``nsteps`` steps.
 
     ``hist`` (``(K, M, n, n)``) holds the last ``nh`` stage offsets ``X - W``, newest in slot
@@ -558,7 +559,7 @@ def advance_elementwise_blocked(
     max_iter: int,
     parallel: bool,
     extrapolate: bool = True,
-) -> dict[str, object]:
+) -> dict[str, Any]:
     """:func:`advance_elementwise` for ensembles, in the blocked member-innermost layout.
 
     Same inputs and outputs (``W`` is ``(M, n, n)``; the result state is returned as

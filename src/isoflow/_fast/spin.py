@@ -30,6 +30,7 @@ chain) and the same stage-offset extrapolation as the NumPy paths. Chains with a
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -406,7 +407,7 @@ def advance_spin(
     divergence_factor: float,
     max_iter: int,
     parallel: bool,
-) -> dict[str, object]:
+) -> dict[str, Any]:
     """Advance ``W`` (``(M, 3, N)``, C-contiguous, overwritten) by ``nsteps`` steps.
 
     The new state is returned as ``"y"`` (``W`` or a second buffer).

@@ -163,7 +163,7 @@ def spin_chain_energy(
 
 
 def _run_error(
-    problem: Any, cls: type[Method], w0: Any, h: float, T: float, save_every: int
+    problem: Any, cls: Any, w0: Any, h: float, T: float, save_every: int
 ) -> tuple[Solution, str]:
     """Fixed-point first; Newton where the fixed point does not converge (large ``h``)."""
     sol = solve(

@@ -88,11 +88,12 @@ def _orbit_measures(ys: Any, M0: Any) -> dict[str, float]:
     for i in range(ys.shape[1]):
         ang = np.unwrap(np.angle(zc[:, i] - zc[:, i].mean()))
         turns.append(float(abs(ang[-1] - ang[0]) / (2 * np.pi)))
-    return {
+    out: dict[str, Any] = {
         "circle_deviation": float(np.max(np.abs(c - c[:1]) / np.abs(c[:1]))),
         "shape_deviation": float(np.max(np.abs(g - g[:1]))),
         "turns": turns,
     }
+    return out
 
 
 def vortices_trajectories(
