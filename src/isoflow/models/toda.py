@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError, ShapeError
+from .._fast.kernels import ElementwiseLinear
 from ..algebras import sym
 from ..problems import IsospectralProblem
 from ._checks import check_n, real_parameter
@@ -227,6 +228,7 @@ def toda(
         B=B,
         algebra=sym(n),
         B_jvp=lambda L, dL: B(dL),
+        kernel=ElementwiseLinear(sign),  # B = sign o L: the compiled fast path applies
         hamiltonian=hamiltonian,
         invariants={"off_band": off_band},
         name=f"non-periodic Toda lattice, n = {n} (Flaschka)",
