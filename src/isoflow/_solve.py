@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import asdict, dataclass
@@ -300,93 +301,58 @@ def solve(
     alg = problem.algebra
     W = alg.validate(y0, "y0")
     problem.check_B(W)
-    if writer is not None:
-        return _solve_streaming(
-            problem,
-            method,
-            W,
-            method.init(problem, W, dt_),
-            k0=0,
-            n=n,
-            t0=float(t0),
-            dt=dt_,
-            save_every=save_every,
-            progress=progress,
-            throw=throw,
-            writer=writer,
-            accumulator=DiagnosticsAccumulator(problem),
-            diagnostics=diagnostics,
-            fresh=True,
-        )
-
-    n_save = n // save_every + 1 + (1 if n % save_every else 0)
-    ys = np.empty((n_save, *W.shape), dtype=alg.dtype)
-    ts = np.empty(n_save)
-    ys[0], ts[0] = W, t0
-    i_save = 1
-
-    state = method.init(problem, W, dt_)
-    total_iter = max_iter = 0
-    max_res = 0.0
-    status, message = STATUS_FINISHED, f"{n} steps of dt = {dt_:g} completed"
-    start = time.perf_counter()
-    k = 0  # steps accepted so far
-    bar = tqdm(
-        total=n,
-        disable=(None if progress is None else not progress),
-        delay=1.0,
-        desc=method.name,
-        unit="step",
-        leave=False,
-    )
-    try:
-        while k < n:
-            chunk = min(save_every - k % save_every, n - k)
-            adv = method.advance(problem, W, dt_, chunk, state)
-            total_iter += adv.iterations_total
-            max_iter = max(max_iter, adv.iterations_max)
-            max_res = max(max_res, adv.residual_max)
-            W, state = adv.y, adv.state
-            k += adv.n_done
-            bar.update(adv.n_done)
-            if adv.failure is not None:
-                failure = _failure_exception(method, adv.failure, k, t0 + k * dt_)
-                if throw:
-                    raise failure
-                status, message = STATUS_FAILED, str(failure)
-                if ts[i_save - 1] != t0 + k * dt_:  # keep the last good state
-                    ys[i_save], ts[i_save] = W, t0 + k * dt_
-                    i_save += 1
-                break
-            ys[i_save], ts[i_save] = W, t0 + k * dt_
-            i_save += 1
-    finally:
-        bar.close()
-    wall = time.perf_counter() - start
-    n_done = k
-    members = max(int(np.prod(alg.batch_shape(W))), 1)
-    stats = SolveStats(
-        n_steps=n_done,
-        n_B_evaluations=total_iter,
-        iterations_mean=total_iter / max(n_done + (status == STATUS_FAILED), 1) / members,
-        iterations_max=max_iter,
-        residual_max=max_res,
-        wall_time=wall,
-    )
-    ts, ys = ts[:i_save], ys[:i_save]
-    diag = compute_diagnostics(problem, ts, ys) if diagnostics else None
-    return Solution(
-        ts=ts,
-        ys=ys,
-        stats=stats,
-        success=status == STATUS_FINISHED,
-        status=status,
-        message=message,
-        diagnostics=diag,
+    memory = _MemoryWriter() if writer is None else None
+    sol = _solve_streaming(
+        problem,
+        method,
+        W,
+        method.init(problem, W, dt_),
+        k0=0,
+        n=n,
         t0=float(t0),
         dt=dt_,
-        n_steps=n,
+        save_every=save_every,
+        progress=progress,
+        throw=throw,
+        writer=writer if memory is None else memory,
+        accumulator=DiagnosticsAccumulator(problem) if memory is None else None,
+        diagnostics=diagnostics,
+        fresh=True,
     )
+    if memory is None:
+        return sol
+    ts, ys = memory.arrays()
+    return dataclasses.replace(
+        sol, ts=ts, ys=ys, diagnostics=compute_diagnostics(problem, ts, ys) if diagnostics else None
+    )
+
+
+class _MemoryWriter:
+    """The in-memory "stream" of :func:`solve` without a writer: keeps every saved state."""
+
+    chunk_rows = 2**62  # never flush early: one chunk at the end
+    flush_seconds = math.inf
+
+    def __init__(self) -> None:
+        self._ts: list[Array] = []
+        self._ys: list[Array] = []
+
+    def open(self, meta: dict[str, Any]) -> None:
+        """Nothing to prepare."""
+
+    def append(self, ts: Array, ys: Array, series: dict[str, Array]) -> None:
+        self._ts.append(ts)
+        self._ys.append(ys)
+
+    def checkpoint(self, step: int, y: Array, method_state: Any) -> None:
+        """In memory there is nothing to make durable."""
+
+    def close(self, info: dict[str, Any]) -> None:
+        """Nothing to release."""
+
+    def arrays(self) -> tuple[Array, Array]:
+        """All saved times and states, time first."""
+        return np.concatenate(self._ts), np.concatenate(self._ys)
 
 
 def _solve_streaming(
@@ -403,7 +369,7 @@ def _solve_streaming(
     progress: bool | None,
     throw: bool,
     writer: StreamWriter,
-    accumulator: DiagnosticsAccumulator,
+    accumulator: DiagnosticsAccumulator | None,
     diagnostics: bool,
     fresh: bool,
 ) -> Solution:
@@ -411,9 +377,11 @@ def _solve_streaming(
 
     ``fresh`` runs open the writer and write the initial state; a resumed run (``fresh=False``)
     continues a writer that already holds the states up to step ``k0``, whose diagnostics
-    ``accumulator`` has absorbed. The per-step arithmetic is that of :func:`solve`, and the
-    ``advance`` calls cover the same step ranges (between saves), so a resumed run reproduces an
-    uninterrupted one bit for bit.
+    ``accumulator`` has absorbed (``None``: the caller computes diagnostics itself, as
+    :func:`solve` does on the states it keeps in memory). This is the only time loop: without a
+    writer :func:`solve` streams into an in-memory one, so the ``advance`` calls cover the same
+    step ranges (between saves) either way and a resumed run reproduces an uninterrupted one bit
+    for bit.
     """
     alg = problem.algebra
     buf_t: list[float] = []
@@ -426,7 +394,7 @@ def _solve_streaming(
         if buf_y:
             ts_c = np.asarray(buf_t, dtype=float)
             ys_c = np.stack(buf_y)
-            series = accumulator.update(ts_c, ys_c)
+            series = accumulator.update(ts_c, ys_c) if accumulator is not None else {}
             writer.append(ts_c, ys_c, series)
             writer.checkpoint(k, y, st)
             buf_t.clear()
@@ -532,7 +500,7 @@ def _solve_streaming(
         success=status == STATUS_FINISHED,
         status=status,
         message=message,
-        diagnostics=accumulator.result() if diagnostics else None,
+        diagnostics=accumulator.result() if diagnostics and accumulator is not None else None,
         t0=t0,
         dt=dt,
         n_steps=n,
