@@ -301,7 +301,10 @@ def solve(
     alg = problem.algebra
     W = alg.validate(y0, "y0")
     problem.check_B(W)
-    memory = _MemoryWriter() if writer is None else None
+    memory: _MemoryWriter | None = None
+    if writer is None:
+        memory = _MemoryWriter()
+        writer = memory
     sol = _solve_streaming(
         problem,
         method,
@@ -314,7 +317,7 @@ def solve(
         save_every=save_every,
         progress=progress,
         throw=throw,
-        writer=writer if memory is None else memory,
+        writer=writer,
         accumulator=DiagnosticsAccumulator(problem) if memory is None else None,
         diagnostics=diagnostics,
         fresh=True,
