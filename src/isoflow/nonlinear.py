@@ -59,6 +59,30 @@ STATUS_NAMES = {
     STATUS_NON_FINITE: "non_finite",
 }
 
+#: Returned by :func:`stopping_status` while the iteration goes on.
+STATUS_RUNNING = -1
+
+
+def stopping_status(
+    r: float, prev: float, first: float, it: int, tol: float, floor: float, divergence: float
+) -> int:
+    """The stopping rules of the module for one member at iteration ``it`` (1-based).
+
+    ``r`` is the current residual, ``prev`` the previous one (``inf`` at the first
+    iteration), ``first`` the first one, ``tol = atol + rtol s`` and ``floor = stall_rtol s``.
+    Returns a ``STATUS_*`` code, ``STATUS_RUNNING`` to go on. This one function is the rule
+    everywhere: the Python solvers call it, the compiled kernels of :mod:`isoflow._fast` use
+    a numba compilation of it.
+    """
+    if not math.isfinite(r):
+        return STATUS_NON_FINITE
+    if r <= tol or (r >= prev and r <= floor):
+        return STATUS_CONVERGED
+    if it > 1 and r > divergence * first:
+        return STATUS_DIVERGED
+    return STATUS_RUNNING
+
+
 #: ``G(X, mask) -> (G(X), aux)``. ``mask`` is ``None`` when ``X`` is the whole ensemble
 #: (original batch shape) and a boolean array over the batch axes when ``X`` holds only the
 #: selected members, stacked on one leading axis.
@@ -221,17 +245,12 @@ class NonlinearSolver:
         for it in range(1, self.max_iter + 1):
             GX, aux = prob.G(X, None)
             r = float(np.linalg.norm((GX - X).ravel()))
-            if not math.isfinite(r):
-                status = STATUS_NON_FINITE
-                break
-            if r <= tol or (r >= prev and r <= floor):
-                status = STATUS_CONVERGED
+            code = stopping_status(r, prev, first, it, tol, floor, self.divergence_factor)
+            if code != STATUS_RUNNING:
+                status = code
                 break
             if it == 1:
                 first = r
-            elif r > self.divergence_factor * first:
-                status = STATUS_DIVERGED
-                break
             prev = r
             X = self._update(prob, X, GX, None)
         assert aux is not None

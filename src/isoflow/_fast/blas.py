@@ -31,9 +31,9 @@ from numpy.typing import NDArray
 from ..methods._base import AdvanceResult, StepResult
 from ..nonlinear import (
     STATUS_CONVERGED,
-    STATUS_DIVERGED,
     STATUS_MAX_ITER,
-    STATUS_NON_FINITE,
+    STATUS_RUNNING,
+    stopping_status,
 )
 from ..problems import IsospectralProblem
 from .kernels import ElementwiseLinear
@@ -171,17 +171,12 @@ def isomp_advance_large(
             np.matmul(B, X, out=P)
             np.matmul(P, B, out=T)
             r = math.sqrt(_combine(W, X, P, T, Cm, G, s, half, quarter))
-            if not math.isfinite(r):
-                status = STATUS_NON_FINITE
-                break
-            if r <= tol or (r >= prev and r <= floor):
-                status = STATUS_CONVERGED
+            code = stopping_status(r, prev, first, it, tol, floor, solver.divergence_factor)
+            if code != STATUS_RUNNING:
+                status = code
                 break
             if it == 1:
                 first = r
-            elif r > solver.divergence_factor * first:
-                status = STATUS_DIVERGED
-                break
             prev = r
             X, G = G, X
         free = next(q for q in range(K + 1) if q not in order[:K])

@@ -31,7 +31,10 @@ import numpy as np
 
 __all__ = ["advance_elementwise"]
 
-_CONVERGED, _MAX_ITER, _DIVERGED, _NON_FINITE = 0, 1, 2, 3
+from ._rules import STATUS_CONVERGED as _CONVERGED
+from ._rules import STATUS_MAX_ITER as _MAX_ITER
+from ._rules import STATUS_RUNNING, stopping_status
+
 #: Reassociation and fused multiply-add: vectorized products and residual sums. Results differ
 #: from the NumPy path (BLAS) only by rounding, as two BLAS builds would.
 _FM = {"reassoc", "nsz", "contract"}
@@ -114,17 +117,12 @@ def _member_step(  # type: ignore[no-untyped-def]
                 P[i, j] = a  # P is free now: store the projected G
                 P[j, i] = b2
         r = math.sqrt(rr)
-        if not math.isfinite(r):
-            status = _NON_FINITE
-            break
-        if r <= tol or (r >= prev and r <= floor):
-            status = _CONVERGED
+        code = stopping_status(r, prev, first, it, tol, floor, divf)
+        if code != STATUS_RUNNING:
+            status = code
             break
         if it == 1:
             first = r
-        elif r > divf * first:
-            status = _DIVERGED
-            break
         prev = r
         for i in range(n):
             for j in range(n):
@@ -397,14 +395,9 @@ def _block_step(  # type: ignore[no-untyped-def]
             r = math.sqrt(rr[q])
             its[q] = it
             res[q] = r
-            if not math.isfinite(r):
-                stat[q] = _NON_FINITE
-                going[q] = False
-            elif r <= tol[q] or (r >= prev[q] and r <= floor[q]):
-                stat[q] = _CONVERGED
-                going[q] = False
-            elif it > 1 and r > divf * first[q]:
-                stat[q] = _DIVERGED
+            code = stopping_status(r, prev[q], first[q], it, tol[q], floor[q], divf)
+            if code != STATUS_RUNNING:
+                stat[q] = code
                 going[q] = False
             else:
                 if it == 1:

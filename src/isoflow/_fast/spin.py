@@ -37,7 +37,10 @@ import numpy as np
 
 __all__ = ["advance_spin"]
 
-_CONVERGED, _MAX_ITER, _DIVERGED, _NON_FINITE = 0, 1, 2, 3
+from ._rules import STATUS_CONVERGED as _CONVERGED
+from ._rules import STATUS_MAX_ITER as _MAX_ITER
+from ._rules import STATUS_RUNNING, stopping_status
+
 _ISOMP, _SMM = 0, 1
 #: Reassociation (and no signed zeros) only: lets LLVM vectorize the residual reductions
 #: (2.4x faster sweeps); results differ from the NumPy path at the last bit, not more.
@@ -345,17 +348,12 @@ def _drive(  # type: ignore[no-untyped-def]
                 else:
                     rr = _sweep_ser(kind, cur, Wm, nxt, m, c, half, quarter)
                 r = math.sqrt(rr)
-                if not math.isfinite(r):
-                    status = _NON_FINITE
-                    break
-                if r <= tol or (r >= prev and r <= floor):
-                    status = _CONVERGED
+                code = stopping_status(r, prev, first, it, tol, floor, divf)
+                if code != STATUS_RUNNING:
+                    status = code
                     break
                 if it == 1:
                     first = r
-                elif r > divf * first:
-                    status = _DIVERGED
-                    break
                 prev = r
                 cur, nxt = nxt, cur
                 in_x = not in_x

@@ -1,0 +1,29 @@
+"""The stopping rules of :mod:`isoflow.nonlinear`, compiled for the kernels.
+
+The kernels call :data:`stopping_status`, a numba compilation (inlined) of the very function
+the Python solvers use, so there is one statement of the rules.
+"""
+
+from __future__ import annotations
+
+import numba
+
+from ..nonlinear import (
+    STATUS_CONVERGED,
+    STATUS_DIVERGED,
+    STATUS_MAX_ITER,
+    STATUS_NON_FINITE,
+    STATUS_RUNNING,
+)
+from ..nonlinear import stopping_status as _stopping_status
+
+__all__ = [
+    "STATUS_CONVERGED",
+    "STATUS_DIVERGED",
+    "STATUS_MAX_ITER",
+    "STATUS_NON_FINITE",
+    "STATUS_RUNNING",
+    "stopping_status",
+]
+
+stopping_status = numba.njit(cache=True, inline="always")(_stopping_status)
