@@ -166,30 +166,20 @@ def _run_error(
     problem: Any, cls: Any, w0: Any, h: float, T: float, save_every: int
 ) -> tuple[Solution, str]:
     """Fixed-point first; Newton where the fixed point does not converge (large ``h``)."""
-    sol = solve(
-        problem,
-        cls(solver=FixedPoint()),
-        w0,
-        dt=h,
-        t1=T,
-        save_every=save_every,
-        diagnostics=False,
-        progress=False,
-        throw=False,
-    )
-    if sol.success:
-        return sol, "fixed-point"
-    sol = solve(
-        problem,
-        cls(solver=Newton()),
-        w0,
-        dt=h,
-        t1=T,
-        save_every=save_every,
-        diagnostics=False,
-        progress=False,
-        throw=False,
-    )
+    for name, solver in (("fixed-point", FixedPoint()), ("newton", Newton())):
+        sol = solve(
+            problem,
+            cls(solver=solver),
+            w0,
+            dt=h,
+            t1=T,
+            save_every=save_every,
+            diagnostics=False,
+            progress=False,
+            throw=False,
+        )
+        if sol.success:
+            return sol, name
     return sol, "newton"
 
 
