@@ -149,6 +149,9 @@ def _accept(W, Wn, X, hist, m, slot):  # type: ignore[no-untyped-def]
             W[i, j] = Wn[i, j]
 
 
+# Serial and parallel drivers are separate functions on purpose: numba's on-disk cache keys an
+# entry by signature, machine and bytecode only (not by ``parallel=``), so one body compiled
+# twice with ``cache=True`` would share a cache entry and one variant could load the other.
 @numba.njit(cache=True)
 def _drive_serial(  # type: ignore[no-untyped-def]
     W, Xs, Wns, work, hist, head, nh, coefs, coeff, s, h, nsteps,
@@ -435,6 +438,9 @@ def _accept_block(W, Wn, X, hist, blk, slot, keep):  # type: ignore[no-untyped-d
                 W[i, j, q] = Wn[i, j, q]
 
 
+# Serial and parallel drivers are separate functions on purpose: numba's on-disk cache keys an
+# entry by signature, machine and bytecode only (not by ``parallel=``), so one body compiled
+# twice with ``cache=True`` would share a cache entry and one variant could load the other.
 @numba.njit(cache=True, parallel=True)
 def _drive_blocks_par(  # type: ignore[no-untyped-def]
     W, Xs, Wns, hist, head, nh, kmax, coefs, coeff, s, h, nsteps, valid,

@@ -94,6 +94,9 @@ def _res_one(G, X, i):  # type: ignore[no-untyped-def]
 
 
 # ---- one sweep, serial and threaded (textually the same loops) -------------------------------
+# The *_ser / *_par pairs below are separate functions on purpose: numba's on-disk cache keys
+# an entry by signature, machine and bytecode only (not by ``parallel=``), so one body
+# compiled twice with ``cache=True`` would share a cache entry.
 @numba.njit(cache=True, fastmath=_FM)
 def _sweep_ser(kind, X, W, G, m, c, half, quarter):  # type: ignore[no-untyped-def]
     N = X.shape[1]
