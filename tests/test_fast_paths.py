@@ -6,6 +6,7 @@ No timing assertions here; speed is measured by ``benchmarks/`` (``isoflow bench
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
 import subprocess
 import sys
@@ -156,12 +157,12 @@ def test_failure_after_good_steps_keeps_last_good_state() -> None:
     assert a.failure.failure_reason() == "max_iter"
 
 
-@pytest.mark.parametrize("space", ["u", "herm"])
+@pytest.mark.parametrize("space", ["u", "su", "herm"])
 def test_complex_spaces_match_numpy(space: str) -> None:
     n = 6
     rng = np.random.default_rng(3)
-    if space == "u":
-        alg = iso.algebras.u(n)
+    if space in ("u", "su"):
+        alg = getattr(iso.algebras, space)(n)
         d = rng.random(n) + 0.5
         C = -(d[:, None] + d[None, :]) / 2
     else:
@@ -171,15 +172,81 @@ def test_complex_spaces_match_numpy(space: str) -> None:
     prob = iso.IsospectralProblem(B=lambda W: C * W, algebra=alg, kernel=ElementwiseLinear(C))
     W = alg.random(seed=4, batch=(9,), scale=0.1)  # blocked ensemble layout
     m = iso.IsoMP()
-    assert_same(m.advance(prob, W, 0.1, 20), numpy_advance(m, prob, W, 0.1, 20))
-    assert_same(m.advance(prob, W[0], 0.1, 20), numpy_advance(m, prob, W[0], 0.1, 20))
+    for y in (W, W[0]):
+        assert dispatch.isomp_advance(m, prob, y, 0.1, 1, None) is not None  # compiled
+        a = m.advance(prob, y, 0.1, 20)
+        assert_same(a, numpy_advance(m, prob, y, 0.1, 20))
+        if space == "su":  # the trace is removed as by the projection of su(n)
+            assert np.max(np.abs(np.trace(a.y, axis1=-2, axis2=-1))) <= 1e-15
+
+
+def test_su_large_dense_matches_numpy_and_stays_traceless() -> None:
+    n = dispatch.LARGE_N
+    alg = iso.algebras.su(n)
+    d = np.linspace(0.5, 1.5, n)
+    C = -(d[:, None] + d[None, :]) / 2
+    prob = iso.IsospectralProblem(B=lambda W: C * W, algebra=alg, kernel=ElementwiseLinear(C))
+    W0 = alg.random(seed=8, scale=1.0 / n)
+    m = iso.IsoMP()
+    assert dispatch.isomp_advance(m, prob, W0, 0.1, 1, None) is not None  # compiled
+    a = m.advance(prob, W0, 0.1, 5)
+    assert_same(a, numpy_advance(m, prob, W0, 0.1, 5))
+    assert abs(np.trace(a.y)) <= 1e-15
 
 
 def test_brockett_model_carries_kernel() -> None:
     prob, W0 = iso.models.brockett(n=6)
-    assert isinstance(prob.kernel, ElementwiseLinear)
+    assert isinstance(prob.kernel, ElementwiseLinear) and prob.kernel.frame is None
     m = iso.IsoMP()
     assert_same(m.advance(prob, W0, 0.1, 30), numpy_advance(m, prob, W0, 0.1, 30))
+
+
+def random_hermitian(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n))
+    return (A + A.conj().T) / 2
+
+
+@pytest.mark.parametrize(("n", "batch"), [(6, ()), (6, (20,)), (dispatch.LARGE_N, ())])
+def test_brockett_nondiagonal_N_runs_compiled_in_its_eigenframe(n: int, batch: tuple) -> None:
+    """``[N, .]`` is entrywise in the eigenframe of ``N``: the compiled path runs there and
+    maps back; same steps (to rounding) as the NumPy path with ``B(W) = NW - WN``."""
+    N = random_hermitian(n, seed=1) / np.sqrt(n)
+    prob, _ = iso.models.brockett(n=n, N=N)
+    assert prob.kernel.frame is not None
+    W0 = iso.algebras.herm(n).random(seed=2, batch=batch, scale=0.5 / np.sqrt(n))
+    m = iso.IsoMP()
+    h = 0.05
+    assert dispatch.isomp_advance(m, prob, W0, h, 1, None) is not None  # compiled
+    a, b = m.advance(prob, W0, h, 12), numpy_advance(m, prob, W0, h, 12)
+    assert_same(a, b, iters_exact=False)
+    np.testing.assert_array_equal(a.y, np.swapaxes(a.y, -1, -2).conj())  # Hermitian exactly
+    for Da, Db in zip(a.state[1:], b.state[1:], strict=True):  # offsets in the user's frame
+        assert np.max(np.abs(Da - Db)) <= 1e-12
+    # resuming from the returned state continues the same trajectory
+    a2 = m.advance(prob, a.y, h, 5, a.state)
+    b2 = numpy_advance(m, prob, b.y, h, 5, b.state)
+    assert_same(a2, b2, iters_exact=False)
+
+
+def test_brockett_nondiagonal_N_failure_maps_back() -> None:
+    N = random_hermitian(6, seed=3)
+    prob, W0 = iso.models.brockett(n=6, N=N)
+    m = iso.IsoMP(solver=iso.FixedPoint(max_iter=2))
+    a, b = m.advance(prob, W0, 0.2, 5), numpy_advance(m, prob, W0, 0.2, 5)
+    assert a.failure is not None and b.failure is not None
+    assert_same(a, b)
+    assert np.max(np.abs(a.failure.stage - b.failure.stage)) <= 1e-12
+
+
+def test_elementwise_frame_validation() -> None:
+    C = np.zeros((3, 3))
+    with pytest.raises(ValueError, match="unitary"):
+        ElementwiseLinear(C, frame=2.0 * np.eye(3))
+    with pytest.raises(ValueError, match="shape"):
+        ElementwiseLinear(C, frame=np.eye(4))
+    with pytest.raises(ValueError, match="non-finite"):
+        ElementwiseLinear(C, frame=np.full((3, 3), np.nan))
 
 
 def test_other_solvers_take_the_numpy_path() -> None:
@@ -193,13 +260,14 @@ def test_kernel_must_be_a_fast_kernel() -> None:
 
 
 # ---- large dense: buffered BLAS path ---------------------------------------------------------
-@pytest.mark.parametrize("space", ["so", "u"])
+@pytest.mark.parametrize("space", ["so", "u", "sym", "herm"])
 @pytest.mark.parametrize("with_kernel", [True, False])
 def test_large_dense_buffered_path_matches_numpy(space: str, with_kernel: bool) -> None:
     n = dispatch.LARGE_N
     alg = getattr(iso.algebras, space)(n)
     d = np.linspace(0.5, 1.5, n)
-    C = -(d[:, None] + d[None, :]) / 2
+    # B in the normalizer: C symmetric on the skew spaces, antisymmetric on Sym/Herm
+    C = -(d[:, None] + d[None, :]) / 2 if space in ("so", "u") else d[:, None] - d[None, :]
     prob = iso.IsospectralProblem(
         B=lambda W: C * W, algebra=alg, kernel=ElementwiseLinear(C) if with_kernel else None
     )
@@ -207,6 +275,36 @@ def test_large_dense_buffered_path_matches_numpy(space: str, with_kernel: bool) 
     m = iso.IsoMP()
     a = m.advance(prob, W0, 0.1, 6)
     assert_same(a, numpy_advance(m, prob, W0, 0.1, 6))
+
+
+@pytest.mark.parametrize(("space", "n"), [("so", 200), ("u", 256), ("herm", 300)])
+def test_large_dense_triangular_product_matches_numpy(space: str, n: int) -> None:
+    """Several row blocks of the half product ``B X B``, ragged last block and tile; the
+    state stays in ``V`` bit for bit."""
+    from isoflow._fast.blas import lower_blocks
+
+    assert len(lower_blocks(n)) >= 2
+    alg = getattr(iso.algebras, space)(n)
+    d = np.linspace(0.5, 1.5, n)
+    C = -(d[:, None] + d[None, :]) / 2 if space in ("so", "u") else d[:, None] - d[None, :]
+    prob = iso.IsospectralProblem(B=lambda W: C * W, algebra=alg, kernel=ElementwiseLinear(C))
+    W0 = alg.random(seed=7, scale=1.0 / n)
+    m = iso.IsoMP()
+    a = m.advance(prob, W0, 0.1, 3)
+    assert_same(a, numpy_advance(m, prob, W0, 0.1, 3))
+    sign = -1.0 if space in ("so", "u") else 1.0
+    np.testing.assert_array_equal(a.y, sign * a.y.conj().T)
+
+
+@pytest.mark.parametrize("n", [1, 31, 32, 33, 64, 130, 1000])
+def test_lower_blocks_tile_the_rows(n: int) -> None:
+    from isoflow._fast.blas import _TILE, lower_blocks
+
+    blocks = lower_blocks(n)
+    assert blocks[0][0] == 0 and blocks[-1][1] == n
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(blocks))
+    assert all(r0 % _TILE == 0 for r0, _ in blocks)
+    assert 1 <= len(blocks) <= 8
 
 
 def test_large_dense_failure_matches_numpy() -> None:
@@ -241,6 +339,20 @@ def test_spin_chain_ensemble() -> None:
     m = iso.IsoMP()
     ref = numpy_advance(m, prob, W, 0.1, 15)
     assert_same(m.advance(prob, W, 0.1, 15), ref, iters_exact=False)
+
+
+@pytest.mark.parametrize("method", [iso.IsoMP(), iso.SphericalMidpoint()])
+def test_single_spin_input_is_not_overwritten(method) -> None:
+    """With one spin the ``(3, N)`` layout is a view of the input: the fast path must copy."""
+    prob = iso.IsospectralProblem(
+        B=SpinNeighbourSum(-1.0).evaluate, algebra=iso.algebras.so3_vectors(1),
+        kernel=SpinNeighbourSum(-1.0),
+    )  # fmt: skip
+    w0 = np.array([[[0.3, -0.2, 0.9]], [[0.1, 0.5, -0.4]]])
+    keep = w0.copy()
+    a = method.advance(prob, w0, 0.1, 4)
+    np.testing.assert_array_equal(w0, keep)
+    assert not np.shares_memory(a.y, w0)
 
 
 @pytest.mark.parametrize("guess", ["extrapolate", "state"])

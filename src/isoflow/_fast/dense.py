@@ -47,7 +47,7 @@ def _abs2(z):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, fastmath=_FM)
 def _member_step(  # type: ignore[no-untyped-def]
-    W, X, G, Bm, P, T, Cm, Wn, hist, m, head, nh, coefs, coeff, s, h,
+    W, X, G, Bm, P, T, Cm, Wn, hist, m, head, nh, coefs, coeff, s, h, traceless,
     rtol, atol, stall_rtol, divf, max_iter,
 ):  # fmt: skip
     """One IsoMP step of member ``m``; returns ``(iterations, residual, status, finite)``."""
@@ -137,6 +137,13 @@ def _member_step(  # type: ignore[no-untyped-def]
             Wn[i, j] = v
             if not (math.isfinite(v.real) and math.isfinite(v.imag)):
                 finite = False
+    if traceless:  # su(n): the state space's projection also removes the trace
+        tr = Wn[0, 0]
+        for i in range(1, n):
+            tr += Wn[i, i]
+        tr = tr / n
+        for i in range(n):
+            Wn[i, i] -= tr
     return it, r, status, finite
 
 
@@ -154,7 +161,7 @@ def _accept(W, Wn, X, hist, m, slot):  # type: ignore[no-untyped-def]
 # twice with ``cache=True`` would share a cache entry and one variant could load the other.
 @numba.njit(cache=True)
 def _drive_serial(  # type: ignore[no-untyped-def]
-    W, Xs, Wns, work, hist, head, nh, coefs, coeff, s, h, nsteps,
+    W, Xs, Wns, work, hist, head, nh, coefs, coeff, s, h, traceless, nsteps,
     rtol, atol, stall_rtol, divf, max_iter, its, res, stat, totals, kmax,
 ):  # fmt: skip
     M = W.shape[0]
@@ -167,7 +174,7 @@ def _drive_serial(  # type: ignore[no-untyped-def]
         for m in range(M):
             it, r, st, fin = _member_step(
                 W[m], Xs[m], work[0, m], work[1, m], work[2, m], work[3, m], work[4, m],
-                Wns[m], hist, m, head, nh, coefs, coeff, s, h,
+                Wns[m], hist, m, head, nh, coefs, coeff, s, h, traceless,
                 rtol, atol, stall_rtol, divf, max_iter,
             )  # fmt: skip
             its[m] = it
@@ -199,7 +206,7 @@ def _drive_serial(  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, parallel=True)
 def _drive_parallel(  # type: ignore[no-untyped-def]
-    W, Xs, Wns, work, hist, head, nh, coefs, coeff, s, h, nsteps,
+    W, Xs, Wns, work, hist, head, nh, coefs, coeff, s, h, traceless, nsteps,
     rtol, atol, stall_rtol, divf, max_iter, its, res, stat, totals, kmax,
 ):  # fmt: skip
     M = W.shape[0]
@@ -212,7 +219,7 @@ def _drive_parallel(  # type: ignore[no-untyped-def]
         for m in numba.prange(M):
             it, r, st, fin = _member_step(
                 W[m], Xs[m], work[0, m], work[1, m], work[2, m], work[3, m], work[4, m],
-                Wns[m], hist, m, head, nh, coefs, coeff, s, h,
+                Wns[m], hist, m, head, nh, coefs, coeff, s, h, traceless,
                 rtol, atol, stall_rtol, divf, max_iter,
             )  # fmt: skip
             its[m] = it
@@ -254,6 +261,7 @@ def advance_elementwise(
     max_iter: int,
     parallel: bool,
     extrapolate: bool = True,
+    traceless: bool = False,
 ) -> dict[str, Any]:
     """Advance the stacked members ``W`` (``(M, n, n)``, modified in place) by ``nsteps`` steps.
 
@@ -275,7 +283,7 @@ def advance_elementwise(
     head = (nh - 1) % K
     drive = _drive_parallel if parallel else _drive_serial
     done, head, nh_out = drive(
-        W, Xs, Wns, work, hist, head, nh, coefs, coeff, float(s), float(h), int(nsteps),
+        W, Xs, Wns, work, hist, head, nh, coefs, coeff, float(s), float(h), traceless, int(nsteps),
         float(rtol), float(atol), float(stall_rtol), float(divergence_factor), int(max_iter),
         its, res, stat, totals, K if extrapolate else 0,
     )  # fmt: skip
@@ -301,7 +309,7 @@ LANES = 16
 
 @numba.njit(cache=True, fastmath=_FM)
 def _block_step(  # type: ignore[no-untyped-def]
-    W, X, Wn, hist, blk, head, nh, coefs, coeff, s, h, valid,
+    W, X, Wn, hist, blk, head, nh, coefs, coeff, s, h, traceless, valid,
     rtol, atol, stall_rtol, divf, max_iter, its, res, stat, fin,
 ):  # fmt: skip
     """One IsoMP step of the members of block ``blk`` (arrays ``(n, n, L)``, lanes last).
@@ -424,6 +432,14 @@ def _block_step(  # type: ignore[no-untyped-def]
                 Wn[i, j, q] = v
                 if not (math.isfinite(v.real) and math.isfinite(v.imag)):
                     fin[q] = False
+    if traceless:  # su(n): the state space's projection also removes the trace
+        for q in range(L):
+            tr = Wn[0, 0, q]
+            for i in range(1, n):
+                tr += Wn[i, i, q]
+            tr = tr / n
+            for i in range(n):
+                Wn[i, i, q] -= tr
 
 
 @numba.njit(cache=True)
@@ -443,7 +459,7 @@ def _accept_block(W, Wn, X, hist, blk, slot, keep):  # type: ignore[no-untyped-d
 # twice with ``cache=True`` would share a cache entry and one variant could load the other.
 @numba.njit(cache=True, parallel=True)
 def _drive_blocks_par(  # type: ignore[no-untyped-def]
-    W, Xs, Wns, hist, head, nh, kmax, coefs, coeff, s, h, nsteps, valid,
+    W, Xs, Wns, hist, head, nh, kmax, coefs, coeff, s, h, traceless, nsteps, valid,
     rtol, atol, stall_rtol, divf, max_iter, its, res, stat, fin, totals,
 ):  # fmt: skip
     nb = W.shape[0]
@@ -454,7 +470,7 @@ def _drive_blocks_par(  # type: ignore[no-untyped-def]
     for step in range(nsteps):
         for b in numba.prange(nb):
             _block_step(
-                W[b], Xs[b], Wns[b], hist, b, head, nh, coefs, coeff, s, h, valid[b],
+                W[b], Xs[b], Wns[b], hist, b, head, nh, coefs, coeff, s, h, traceless, valid[b],
                 rtol, atol, stall_rtol, divf, max_iter, its[b], res[b], stat[b], fin[b],
             )  # fmt: skip
         ok = True
@@ -487,7 +503,7 @@ def _drive_blocks_par(  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def _drive_blocks_ser(  # type: ignore[no-untyped-def]
-    W, Xs, Wns, hist, head, nh, kmax, coefs, coeff, s, h, nsteps, valid,
+    W, Xs, Wns, hist, head, nh, kmax, coefs, coeff, s, h, traceless, nsteps, valid,
     rtol, atol, stall_rtol, divf, max_iter, its, res, stat, fin, totals,
 ):  # fmt: skip
     nb = W.shape[0]
@@ -498,7 +514,7 @@ def _drive_blocks_ser(  # type: ignore[no-untyped-def]
     for step in range(nsteps):
         for b in range(nb):
             _block_step(
-                W[b], Xs[b], Wns[b], hist, b, head, nh, coefs, coeff, s, h, valid[b],
+                W[b], Xs[b], Wns[b], hist, b, head, nh, coefs, coeff, s, h, traceless, valid[b],
                 rtol, atol, stall_rtol, divf, max_iter, its[b], res[b], stat[b], fin[b],
             )  # fmt: skip
         ok = True
@@ -558,6 +574,7 @@ def advance_elementwise_blocked(
     max_iter: int,
     parallel: bool,
     extrapolate: bool = True,
+    traceless: bool = False,
 ) -> dict[str, Any]:
     """:func:`advance_elementwise` for ensembles, in the blocked member-innermost layout.
 
@@ -584,7 +601,7 @@ def advance_elementwise_blocked(
     drive = _drive_blocks_par if parallel else _drive_blocks_ser
     done, head, nh_out = drive(
         Wb, Xs, Wns, hb, head, nh, K if extrapolate else 0, coefs, coeff, float(s), float(h),
-        int(nsteps), valid, float(rtol), float(atol), float(stall_rtol),
+        traceless, int(nsteps), valid, float(rtol), float(atol), float(stall_rtol),
         float(divergence_factor), int(max_iter), its, res, stat, fin, totals,
     )  # fmt: skip
     order = [(head - q) % K for q in range(nh_out)][::-1]

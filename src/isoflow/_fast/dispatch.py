@@ -8,6 +8,7 @@ falls back to its Python loop over ``step``.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -17,7 +18,7 @@ from ..algebras.hermitian import Hermitian
 from ..algebras.orthogonal import SpecialOrthogonal
 from ..algebras.spin import SpinVectors
 from ..algebras.symmetric import Symmetric
-from ..algebras.unitary import Unitary
+from ..algebras.unitary import SpecialUnitary, Unitary
 from ..methods._base import AdvanceResult, StepResult
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
@@ -43,9 +44,10 @@ PARALLEL_MIN_SPINS = 200_000
 
 
 def sigma_sign(alg: Any) -> float | None:
-    r"""``s`` with :math:`\sigma(Y) = s\,\bar Y^T` for the four spaces the fast paths know."""
+    r"""``s`` with :math:`\sigma(Y) = s\,\bar Y^T` for the five spaces the fast paths know
+    (``su(n)`` is ``u(n)`` plus the trace removal of its projection, see ``alg.traceless``)."""
     t = type(alg)
-    if t is SpecialOrthogonal or t is Unitary:
+    if t is SpecialOrthogonal or t is Unitary or t is SpecialUnitary:
         return -1.0
     if t is Symmetric or t is Hermitian:
         return 1.0
@@ -92,11 +94,18 @@ def isomp_advance(
     method: IsoMP, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any
 ) -> AdvanceResult | None:
     """Compiled ``n`` steps of IsoMP, or ``None`` when no fast path applies."""
+    return _isomp_advance(method, problem, problem.kernel, y, h, n, state)
+
+
+def _isomp_advance(
+    method: IsoMP, problem: IsospectralProblem, kernel: Any, y: Array, h: float, n: int,
+    state: Any,
+) -> AdvanceResult | None:  # fmt: skip
+    """:func:`isomp_advance` with the kernel given (the frame-free one inside a frame)."""
     solver = method.solver
     if type(solver) is not FixedPoint or n < 1:
         return None
     alg = problem.algebra
-    kernel = problem.kernel
     y = np.asarray(y)
     if y.dtype != alg.dtype:
         return None
@@ -108,21 +117,66 @@ def isomp_advance(
         s = sigma_sign(alg)
         if s is None or kernel.coeff.shape != alg.shape:
             return None
+        if kernel.frame is not None:
+            return _in_frame(method, problem, kernel, y, h, n, state)
         if alg.shape[0] > SMALL_N:
             if batch != ():
                 return None
             from . import blas
 
-            return blas.isomp_advance_large(method, problem, y, h, n, state)
-        return _dense_elementwise(method, kernel, alg, y, h, n, offsets, K, extrap, s, state)
+            return blas.isomp_advance_large(method, problem, kernel.coeff, y, h, n, state)
+        coeff = kernel.coeff
+        return _dense_elementwise(method, coeff, alg, y, h, n, offsets, K, extrap, s, state)
     if isinstance(kernel, SpinNeighbourSum) and isinstance(alg, SpinVectors):
         return spin_advance("isomp", method, kernel, y, h, n, offsets, K, extrap, state)
     if kernel is None and batch == () and sigma_sign(alg) is not None:
         if alg.shape[0] >= LARGE_N:
             from . import blas
 
-            return blas.isomp_advance_large(method, problem, y, h, n, state)
+            return blas.isomp_advance_large(method, problem, None, y, h, n, state)
     return None
+
+
+def _in_frame(
+    method: IsoMP, problem: IsospectralProblem, kernel: ElementwiseLinear, y: Array, h: float,
+    n: int, state: Any,
+) -> AdvanceResult | None:  # fmt: skip
+    r"""IsoMP for ``B(W) = U (C * (U^H W U)) U^H``: the entrywise fast path on
+    :math:`U^\dagger W U` (states and stored stage offsets), results mapped back by
+    :math:`Y \mapsto \Pi(U Y U^\dagger)` (``Pi`` the projection onto the space, which only
+    removes rounding). IsoMP is equivariant under this change of frame (see
+    :class:`~isoflow._fast.kernels.ElementwiseLinear`).
+    """
+    alg = problem.algebra
+    U = kernel.frame
+    assert U is not None
+    if np.result_type(U.dtype, alg.dtype) != alg.dtype:
+        return None
+    Uh = np.ascontiguousarray(U.conj().T)
+    stage = alg.stage_algebra
+
+    def into(A: Array) -> Array:
+        return np.ascontiguousarray(Uh @ np.asarray(A) @ U)
+
+    def back(A: Array, space: Any) -> Array:
+        return np.asarray(space.project(U @ A @ Uh))
+
+    rotated = state
+    if state is not None and len(state) > 1:
+        rotated = (state[0], *(into(D) for D in state[1:]))
+    res = _isomp_advance(method, problem, ElementwiseLinear(kernel.coeff), into(y), h, n, rotated)
+    if res is None:
+        return None
+    new_state = res.state
+    if res.state is rotated:  # no step taken: the caller's state, untouched
+        new_state = state
+    elif res.state is not None:
+        new_state = (res.state[0], *(back(D, stage) for D in res.state[1:]))
+    failure = res.failure
+    if failure is not None:
+        fstage = None if failure.stage is None else back(failure.stage, stage)
+        failure = dataclasses.replace(failure, y=back(failure.y, alg), stage=fstage)
+    return dataclasses.replace(res, y=back(res.y, alg), state=new_state, failure=failure)
 
 
 def smm_advance(
@@ -149,7 +203,7 @@ def smm_advance(
 
 
 def _dense_elementwise(
-    method: IsoMP, kernel: ElementwiseLinear, alg: Any, y: Array, h: float, n: int,
+    method: IsoMP, coeff: Array, alg: Any, y: Array, h: float, n: int,
     offsets: tuple[Array, ...], K: int, extrap: bool, s: float, state: Any,
 ) -> AdvanceResult:  # fmt: skip
     from .dense import advance_elementwise, advance_elementwise_blocked
@@ -163,7 +217,7 @@ def _dense_elementwise(
     nh = len(offsets) if extrap else 0
     for q, D in enumerate(offsets[::-1]):  # oldest .. newest
         hist[q] = np.asarray(D, dtype=alg.dtype).reshape(M, *core)
-    coeff = np.ascontiguousarray(kernel.coeff)
+    coeff = np.ascontiguousarray(coeff)
     coefs = _extrap_table(K)
     blocked = M >= BLOCKED_MIN_MEMBERS
     run = advance_elementwise_blocked if blocked else advance_elementwise
@@ -172,6 +226,7 @@ def _dense_elementwise(
         solver.divergence_factor, solver.max_iter,
         parallel=M >= PARALLEL_MIN_MEMBERS and _threads() > 1,
         extrapolate=extrap,
+        traceless=bool(alg.traceless),
     )  # fmt: skip
     if blocked:
         Wf = out["y"]
@@ -201,7 +256,7 @@ def spin_advance(
     M = int(np.prod(batch)) if batch else 1
     par = N >= PARALLEL_MIN_SPINS and _threads() > 1
     W = np.ascontiguousarray(np.swapaxes(y.reshape(M, N, 3), -1, -2), dtype=np.float64)
-    if W is y:
+    if np.shares_memory(W, y):  # e.g. one spin: the transpose is a view of the input
         W = W.copy()
     hist = np.empty((K + 1, M, 3, N))  # slots are written before they are read
     nh = len(offsets) if extrap else 0

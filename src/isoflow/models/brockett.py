@@ -169,8 +169,13 @@ def brockett(
         def lyapunov(W: Array) -> Array:
             return np.real(np.diagonal(W, axis1=-2, axis2=-1)) @ nu
 
+        kernel = ElementwiseLinear(gaps)
     else:
         NT = np.ascontiguousarray(Nmat.T)
+        # the compiled path works in the eigenframe N = U diag(nu_U) U^H, where [N, .] is
+        # entrywise (see ElementwiseLinear)
+        nu_U, U = np.linalg.eigh(Nmat)
+        kernel = ElementwiseLinear(nu_U[:, None] - nu_U[None, :], frame=U)
 
         def B(W: Array) -> Array:
             return Nmat @ W - W @ Nmat
@@ -181,7 +186,7 @@ def brockett(
     problem = IsospectralProblem(
         B=B,
         algebra=alg,
-        kernel=ElementwiseLinear(gaps) if nu is not None else None,  # compiled fast path
+        kernel=kernel,  # compiled fast path
         B_jvp=lambda W, dW: B(dW),
         lyapunov=lyapunov,
         name=f"Brockett double bracket flow on herm({n})",
