@@ -26,6 +26,7 @@ from ._errors import StepSizeError as StepSizeError
 from ._errors import TimeSpanError as TimeSpanError
 from ._errors import UnsupportedAlgebraError as UnsupportedAlgebraError
 from ._fast.kernels import ElementwiseLinear as ElementwiseLinear
+from ._fast.kernels import PairwiseVortex as PairwiseVortex
 from ._fast.kernels import SpinNeighbourSum as SpinNeighbourSum
 from ._solve import Solution as Solution
 from ._solve import SolveStats as SolveStats
@@ -68,6 +69,7 @@ __all__ = [
     "Newton",
     "NonFiniteError",
     "NotInSpaceError",
+    "PairwiseVortex",
     "ParameterError",
     "ShapeError",
     "Solution",

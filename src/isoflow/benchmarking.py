@@ -19,6 +19,10 @@ so the numbers transfer between machines:
 6. Mean fixed-point iterations per step on the paper's rigid body and spin chain (``h = 0.1``)
    at the default (``rtol = 1e-14``) and the tightest (``1e-16``) tolerance, paper's
    ``X_0 = W_k`` against the default extrapolation.
+7. Point vortices (paper's hyperbolic configuration 1, ``h = 0.01``; ``N = 3`` and
+   ``N = 100`` vortices on the sphere, ``h = 0.01``), one system: IsoMP time per step of the
+   compiled loop (``PairwiseVortex`` kernel) against the NumPy path (``kernel=None``). No
+   target; the speed-up is reported.
 
 Run ``isoflow bench`` or ``python -m isoflow.benchmarking`` (``--quick`` for a short run,
 ``--only 1,4``); results go to ``<out>/benchmarks.json`` and ``<out>/benchmarks.md``.
@@ -525,11 +529,89 @@ def bench_iterations(quick: bool) -> list[dict[str, Any]]:
     return out
 
 
+# ---- 7: point vortices -------------------------------------------------------------------------
+def _vortex_cases() -> list[tuple[str, Any, np.ndarray]]:
+    """The paper's hyperbolic configuration 1, and 3 and 100 vortices on the sphere.
+
+    The sphere positions are Fibonacci points (well separated, so ``h = 0.01`` is a moderate
+    step), the circulations random in ``[0.5, 1.5]`` (seeded; one sign, so that no dipole
+    pairs form and run off).
+    """
+    import isoflow as iso
+
+    cases: list[tuple[str, Any, np.ndarray]] = []
+    prob, w0 = iso.models.hyperbolic_vortices(config=1)
+    cases.append(("hyperbolic vortices, paper config 1 (N = 3)", prob, w0))
+    rng = np.random.default_rng(0)
+    for N in (3, 100):
+        k = np.arange(N) + 0.5
+        z = 1.0 - 2.0 * k / N
+        phi = np.pi * (1.0 + np.sqrt(5.0)) * k
+        r = np.sqrt(1.0 - z * z)
+        x = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+        circ = rng.uniform(0.5, 1.5, N)
+        prob, x0 = iso.models.sphere_vortices(positions=x, circulations=circ)
+        cases.append((f"sphere vortices, N = {N}", prob, x0))
+    return cases
+
+
+def bench_vortices(quick: bool) -> list[dict[str, Any]]:
+    import isoflow as iso
+
+    from .threads import thread_limits
+
+    h = 0.01
+    m = iso.IsoMP()
+    out = []
+    with thread_limits(blas=1, numba=1):  # one system: the compiled loop is serial
+        for label, prob, y0 in _vortex_cases():
+            plain = dataclasses.replace(prob, kernel=None)
+            N = y0.shape[-2]
+            warm = m.advance(prob, y0, h, 5)  # a running warm start for both
+            n = 2000 if N <= 10 else 100  # the same steps for both paths
+            if quick:
+                n //= 4
+            res: dict[str, Any] = {}
+
+            def fast(res=res, prob=prob, warm=warm, n=n) -> None:
+                res["fast"] = m.advance(prob, warm.y, h, n, warm.state)
+
+            def base(res=res, plain=plain, warm=warm, n=n) -> None:
+                res["base"] = m.advance(plain, warm.y, h, n, warm.state)
+
+            t_fast, t_base = _paired_time(fast, base, repeats=5 if not quick else 3)
+            its = {k: res[k].iterations_total / n for k in ("fast", "base")}
+            if res["fast"].n_done != n or res["base"].n_done != n:  # pragma: no cover
+                raise RuntimeError(f"benchmark 7: {label} failed before {n} steps")
+            t_fast /= n
+            t_base /= n
+            out.append(
+                {
+                    "id": 7,
+                    "name": f"{label}: IsoMP time per step, compiled / NumPy path",
+                    "N": N,
+                    "h": h,
+                    "steps": n,
+                    "fast_us_per_step": t_fast * 1e6,
+                    "numpy_us_per_step": t_base * 1e6,
+                    "fast_us_per_iteration": t_fast / its["fast"] * 1e6,
+                    "numpy_us_per_iteration": t_base / its["base"] * 1e6,
+                    "iterations_per_step": {"fast": its["fast"], "numpy": its["base"]},
+                    "threads": {"blas": 1, "numba": 1},
+                    "metric": "speed-up (NumPy path / compiled)",
+                    "value": t_base / t_fast,
+                    "target": "(none)",
+                    "met": None,
+                }
+            )
+    return out
+
+
 # ---- driver -------------------------------------------------------------------------------------
 def run(only: Sequence[int] | None = None, quick: bool = False,
         figure: str | Path | None = None) -> dict[str, Any]:  # fmt: skip
     """Run the selected benchmarks; returns ``{"machine", "results", "wall_time"}``."""
-    sel = set(only) if only else {1, 2, 3, 4, 5, 6}
+    sel = set(only) if only else {1, 2, 3, 4, 5, 6, 7}
     start = time.perf_counter()
     results: list[dict[str, Any]] = []
     steps: list[tuple[int, Callable[[], Any]]] = [
@@ -539,6 +621,7 @@ def run(only: Sequence[int] | None = None, quick: bool = False,
         (5, lambda: bench_isomp_vs_smm(quick, figure)),
         (4, lambda: bench_spin_bandwidth(quick)),
         (3, lambda: bench_large_dense(quick)),
+        (7, lambda: bench_vortices(quick)),
     ]
     for k, fn in steps:
         if k in sel:
@@ -593,7 +676,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="isoflow bench", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="benchmark-results", help="output directory")
     ap.add_argument("--quick", action="store_true", help="smaller sizes (about a minute)")
-    ap.add_argument("--only", default="", help="comma-separated benchmark numbers (1-6)")
+    ap.add_argument("--only", default="", help="comma-separated benchmark numbers (1-7)")
     ap.add_argument("--figure", default=None, help="write the spin-chain-cost PNG here")
     args = ap.parse_args(argv)
     only = [int(k) for k in args.only.split(",") if k.strip()] if args.only else None

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._errors import InvalidBError
-from ._fast.kernels import ElementwiseLinear, FastKernel, SpinNeighbourSum
+from ._fast.kernels import ElementwiseLinear, FastKernel, PairwiseVortex, SpinNeighbourSum
 from .algebras import Algebra
 
 __all__ = ["IsospectralProblem"]
@@ -48,11 +48,14 @@ class IsospectralProblem:
         Name used in messages and output files.
     parameters : mapping
         The model parameters, recorded with results.
-    kernel : ElementwiseLinear, SpinNeighbourSum or None
+    kernel : ElementwiseLinear, SpinNeighbourSum, PairwiseVortex or None
         Optional compiled description of the *same* ``B`` (see :mod:`isoflow._fast.kernels`):
         ``ElementwiseLinear(C)`` for :math:`B(W) = C\circ W` on ``so(n)``, ``u(n)``, ``Sym(n)``,
         ``Herm(n)``; ``SpinNeighbourSum(c)`` for :math:`B_i = c\,(w_{i-1} + w_{i+1})` on
-        :math:`(\mathbb{R}^3,\times)^N`. When set, :class:`~isoflow.IsoMP` and
+        :math:`(\mathbb{R}^3,\times)^N`; ``PairwiseVortex(Gamma, geometry)`` for the point-vortex
+        field :math:`B_i = c \sum_{j \ne i} \Gamma_j f(w_i \cdot w_j)\, w_j` on
+        :math:`(\mathbb{R}^3,\times)^N` (``"sphere"``) or :math:`(\mathbb{R}^3,\times_L)^N`
+        (``"hyperbolic"``). When set, :class:`~isoflow.IsoMP` and
         :class:`~isoflow.SphericalMidpoint` with the default fixed-point solver run the whole
         time loop in compiled code (same answer, same iteration counts as the NumPy path to
         rounding). ``None`` (default): the general NumPy path.
@@ -71,11 +74,11 @@ class IsospectralProblem:
 
     def __post_init__(self) -> None:
         if self.kernel is not None and not isinstance(
-            self.kernel, (ElementwiseLinear, SpinNeighbourSum)
+            self.kernel, (ElementwiseLinear, SpinNeighbourSum, PairwiseVortex)
         ):
             raise TypeError(
-                "kernel must be an isoflow fast kernel (ElementwiseLinear, SpinNeighbourSum) "
-                f"or None, got {self.kernel!r}"
+                "kernel must be an isoflow fast kernel (ElementwiseLinear, SpinNeighbourSum, "
+                f"PairwiseVortex) or None, got {self.kernel!r}"
             )
         if not callable(self.B):
             raise TypeError(f"B must be callable, got {type(self.B).__name__}")

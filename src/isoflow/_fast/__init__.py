@@ -1,5 +1,5 @@
 """Compiled (numba) fast paths of the time loops; see :mod:`isoflow._fast.kernels`."""
 
-from .kernels import ElementwiseLinear, FastKernel, SpinNeighbourSum
+from .kernels import ElementwiseLinear, FastKernel, PairwiseVortex, SpinNeighbourSum
 
-__all__ = ["ElementwiseLinear", "FastKernel", "SpinNeighbourSum"]
+__all__ = ["ElementwiseLinear", "FastKernel", "PairwiseVortex", "SpinNeighbourSum"]

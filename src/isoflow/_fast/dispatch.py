@@ -16,13 +16,14 @@ from numpy.typing import NDArray
 
 from ..algebras.hermitian import Hermitian
 from ..algebras.orthogonal import SpecialOrthogonal
+from ..algebras.sl2_vectors import SL2Vectors
 from ..algebras.spin import SpinVectors
 from ..algebras.symmetric import Symmetric
 from ..algebras.unitary import SpecialUnitary, Unitary
 from ..methods._base import AdvanceResult, StepResult
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
-from .kernels import ElementwiseLinear, SpinNeighbourSum
+from .kernels import ElementwiseLinear, PairwiseVortex, SpinNeighbourSum
 
 if TYPE_CHECKING:
     from ..methods.isomp import IsoMP
@@ -129,6 +130,8 @@ def _isomp_advance(
         return _dense_elementwise(method, coeff, alg, y, h, n, offsets, K, extrap, s, state)
     if isinstance(kernel, SpinNeighbourSum) and isinstance(alg, SpinVectors):
         return spin_advance("isomp", method, kernel, y, h, n, offsets, K, extrap, state)
+    if isinstance(kernel, PairwiseVortex) and _vortex_fits(kernel, alg, y, "isomp"):
+        return vortex_advance("isomp", method, kernel, y, h, n, offsets, K, extrap, state)
     if kernel is None and batch == () and sigma_sign(alg) is not None:
         if alg.shape[0] >= LARGE_N:
             from . import blas
@@ -190,15 +193,21 @@ def smm_advance(
     kernel = problem.kernel
     if type(method.solver) is not FixedPoint or n < 1:
         return None
-    if not (isinstance(kernel, SpinNeighbourSum) and isinstance(problem.algebra, SpinVectors)):
-        return None
     y = np.asarray(y)
+    vortex = isinstance(kernel, PairwiseVortex) and _vortex_fits(kernel, problem.algebra, y, "smm")
+    if not vortex and not (
+        isinstance(kernel, SpinNeighbourSum) and isinstance(problem.algebra, SpinVectors)
+    ):
+        return None
     if y.dtype != np.float64:
         return None
     extrap = method.initial_guess == "extrapolate"
     offsets: tuple[Array, ...] = ()
     if extrap and state is not None and len(state) >= 2 and state[0] == h:
         offsets = (state[1],)
+    if isinstance(kernel, PairwiseVortex):
+        return vortex_advance("smm", method, kernel, y, h, n, offsets, 1, extrap, state)
+    assert isinstance(kernel, SpinNeighbourSum)
     return spin_advance("smm", method, kernel, y, h, n, offsets, 1, extrap, state)
 
 
@@ -287,6 +296,89 @@ def spin_advance(
         new_state = (h, *[back(D) for D in out["hist"][::-1]]) if extrap else None
     return AdvanceResult(
         y=y_out,
+        state=new_state,
+        n_done=out["n_done"],
+        iterations_total=out["iterations_total"],
+        iterations_max=out["iterations_max"],
+        residual_max=out["residual_max"],
+        failure=failure,
+    )
+
+
+# ---- point vortices -----------------------------------------------------------------------------
+#: Smallest vortex ensemble whose members are spread over numba threads (one system is
+#: serial: ``N`` is small).
+PARALLEL_MIN_VORTEX_MEMBERS = 2
+#: ... and the smallest ``members * (N^2 + 50)`` (about the work of one iteration, the pairs
+#: plus a per-member overhead) for that. Measured on 2 cores: a step of 16 members of 3
+#: vortices (2.5 us) is slower threaded, 4 members of 100 vortices almost twice as fast.
+PARALLEL_MIN_VORTEX_WORK = 4000
+
+
+def _vortex_fits(kernel: PairwiseVortex, alg: Any, y: Array, kind: str) -> bool:
+    """Whether ``kernel`` runs compiled on ``alg`` for ``y``: the sphere on
+    :class:`SpinVectors`, the hyperboloid on :class:`SL2Vectors` (IsoMP only), ``N`` vortices
+    and a ``float64`` state ``(*batch, N, 3)``."""
+    space = SpinVectors if kernel.geometry == "sphere" else SL2Vectors
+    if kind == "smm" and kernel.geometry != "sphere":
+        return False
+    return (
+        type(alg) is space
+        and alg.N == kernel.N
+        and y.dtype == np.float64
+        and y.ndim >= 2
+        and y.shape[-2:] == (kernel.N, 3)
+    )
+
+
+def vortex_advance(
+    kind: str, method: Any, kernel: PairwiseVortex, y: Array, h: float, n: int,
+    offsets: tuple[Array, ...], K: int, extrap: bool, state: Any,
+) -> AdvanceResult:  # fmt: skip
+    """Compiled ``n`` steps of IsoMP (``kind="isomp"``) or the spherical midpoint (``"smm"``)
+    for the point-vortex field :class:`~isoflow._fast.kernels.PairwiseVortex`.
+
+    Same conventions as :func:`spin_advance`: ``offsets`` are the stored stage offsets, newest
+    first, ``K`` the ring length (offsets kept), ``extrap`` whether the method extrapolates;
+    on failure ``y`` is the last good state and ``failure`` the rejected step.
+    """
+    from .vortices import advance_vortices
+
+    solver = method.solver
+    N = y.shape[-2]
+    batch = y.shape[:-2]
+    M = int(np.prod(batch)) if batch else 1
+    par = (
+        M >= PARALLEL_MIN_VORTEX_MEMBERS
+        and M * (N * N + 50) >= PARALLEL_MIN_VORTEX_WORK
+        and _threads() > 1
+    )
+    nh = len(offsets) if extrap else 0
+    hist = [np.asarray(D, dtype=np.float64).reshape(M, N, 3) for D in offsets[:nh][::-1]]
+    out = advance_vortices(
+        kind, kernel.geometry, y.reshape(M, N, 3), hist, K, extrap, _extrap_table(K),
+        kernel.circulations, kernel.coefficient, h, n, solver.rtol, solver.atol,
+        solver.stall_rtol, solver.divergence_factor, solver.max_iter, par,
+    )  # fmt: skip
+
+    def back(A: Array) -> Array:
+        return A.reshape(*batch, N, 3)
+
+    failure = None
+    if out["n_done"] != n:
+        failure = StepResult(
+            y=back(out["y_failed"]),
+            stage=back(out["stage"]),
+            iterations=out["iterations"].reshape(batch).copy(),
+            residual=out["residual"].reshape(batch).copy(),
+            status=out["status"].reshape(batch).copy(),
+            state=None,
+        )
+    new_state = state
+    if out["n_done"] > 0:
+        new_state = (h, *[back(D) for D in out["hist"][::-1]]) if extrap else None
+    return AdvanceResult(
+        y=back(out["y"]),
         state=new_state,
         n_done=out["n_done"],
         iterations_total=out["iterations_total"],

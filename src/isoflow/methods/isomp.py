@@ -181,12 +181,14 @@ class IsoMP(Method):
         r"""Take ``n`` steps; compiled when the problem carries a :class:`FastKernel`.
 
         With the default :class:`~isoflow.FixedPoint` solver the whole loop runs in compiled
-        code for ``problem.kernel`` = ``ElementwiseLinear`` on ``so(n)``, ``u(n)``,
-        ``Sym(n)``, ``Herm(n)`` (small ``n``), ``SpinNeighbourSum`` on
-        :math:`(\mathbb{R}^3,\times)^N`; single large matrices (``n >= 128``, any ``B``) use
-        preallocated buffers and two BLAS products per iteration. Everything else loops over
-        :meth:`step`. The fast paths follow the same stopping rules, extrapolation and failure
-        semantics, so they return the same :class:`AdvanceResult` (to rounding).
+        code for ``problem.kernel`` = ``ElementwiseLinear`` (with or without a frame) on
+        ``so(n)``, ``u(n)``, ``su(n)``, ``Sym(n)``, ``Herm(n)`` (small ``n``),
+        ``SpinNeighbourSum`` on :math:`(\mathbb{R}^3,\times)^N`, ``PairwiseVortex`` on
+        :math:`(\mathbb{R}^3,\times)^N` and :math:`(\mathbb{R}^3,\times_L)^N`; single large
+        matrices (``n >= 128``, any ``B``) use preallocated buffers, one full and one half
+        BLAS product per iteration. Everything else loops over :meth:`step`. The fast
+        paths follow the same stopping rules, extrapolation and failure semantics, so they
+        return the same :class:`AdvanceResult` (to rounding).
         """
         from .._fast import dispatch
 

@@ -193,7 +193,8 @@ class SphericalMidpoint(Method):
     def advance(
         self, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any = None
     ) -> AdvanceResult:
-        """Take ``n`` steps; compiled for ``problem.kernel = SpinNeighbourSum`` (spin chains).
+        """Take ``n`` steps; compiled for ``problem.kernel`` = ``SpinNeighbourSum`` (spin chains)
+        or ``PairwiseVortex(geometry="sphere")`` (point vortices on the sphere).
 
         With the default :class:`~isoflow.FixedPoint` solver the whole loop runs in compiled
         code (same stopping rules, warm start and failure semantics as :meth:`step`, same

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import NotInSpaceError, ParameterError, ShapeError
+from .._fast.kernels import PairwiseVortex
 from ..algebras.sl2_vectors import L_DIAG, SL2Vectors
 from ..problems import IsospectralProblem
 from ._checks import real_parameter
@@ -268,6 +269,7 @@ def hyperbolic_vortices(
         B_jvp=B_jvp,
         invariants={"momentum": momentum},
         name=f"point vortices on the hyperbolic plane (N = {N})",
+        kernel=PairwiseVortex(G, "hyperbolic"),  # the same B, for the compiled fast paths
         parameters={"config": cfg, "circulations": G, "positions": w_init.copy()},
     )
     return problem, w_init

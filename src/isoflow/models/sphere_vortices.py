@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import NotInSpaceError, ParameterError
+from .._fast.kernels import PairwiseVortex
 from ..algebras.spin import SpinVectors
 from ..problems import IsospectralProblem
 from .hyperbolic_vortices import _check_separated, _check_vortex_input
@@ -155,6 +156,7 @@ def sphere_vortices(
         B_jvp=B_jvp,
         invariants={"momentum": momentum},
         name=f"point vortices on the sphere (N = {N})",
+        kernel=PairwiseVortex(G, "sphere"),  # the same B, for the compiled fast paths
         parameters={"circulations": G, "positions": x_init.copy()},
     )
     return problem, x_init
