@@ -20,7 +20,8 @@ Three facts of the structure are used:
 * ``W``, every iterate ``X`` and ``W_{k+1}`` are kept in ``V`` bit for bit (each strictly
   upper entry is written as ``s * conj`` of its mirror; for ``su(n)`` the trace of
   ``W_{k+1}`` is then removed, as by its projection), so ``|G - X|^2`` is summed over the
-  lower triangle only.
+  lower triangle only; inside the time loop the states ``W`` and the stored offsets are only
+  read, and so only written, on their lower triangles (mirrored when a call returns).
 
 Everything after the products is one cache-blocked compiled pass over pairs of mirrored tiles
 (bracket, iterate, residual), reading each of ``P`` and ``T`` once. ``B`` is the problem's
@@ -146,8 +147,13 @@ def _combine(W, X, P, T, G, s, half, quarter):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, fastmath=_FM)
 def _finish(W, X, P, h, s, Wn, D):  # type: ignore[no-untyped-def]
-    """``Wn = W + h (P + sigma(P))`` and ``D = X - W`` on the lower triangles, mirrored (both
-    exactly in ``V``); returns finiteness of ``Wn``."""
+    """``Wn = W + h (P + sigma(P))`` and ``D = X - W`` on the lower triangles; returns
+    finiteness of ``Wn``.
+
+    The strict upper triangles are not written: inside the time loop ``W`` and the offsets are
+    only read on their lower triangles (by :func:`_guess`, :func:`_combine` and this
+    function); :func:`_mirror_lower` completes what a call returns.
+    """
     n = W.shape[0]
     PT = np.empty((_TILE, _TILE), dtype=P.dtype)
     acc = 0.0  # finite iff every entry is (a sum of absolute values: no branch in the loop)
@@ -177,8 +183,6 @@ def _finish(W, X, P, h, s, Wn, D):  # type: ignore[no-untyped-def]
                 Wn[i, j] = v
                 D[i, j] = X[i, j] - W[i, j]
                 acc += abs(v.real) + abs(v.imag)
-    _mirror_lower(Wn, s)
-    _mirror_lower(D, s)
     return math.isfinite(acc)
 
 
@@ -224,24 +228,54 @@ def _project_into(Y, s, W):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True, fastmath=_FM)
 def _guess(W, H, order, weights, s, X):  # type: ignore[no-untyped-def]
     """``X = W + sum_q weights[q] H[order[q]]`` on the lower triangle, mirrored into ``V``;
-    returns ``|W|^2``."""
+    returns ``|W|^2``. Row pieces with the first four offsets written out (they vectorize)."""
     n = W.shape[0]
     m = order.shape[0]
     acc = 0.0
+    a0 = weights[0] if m > 0 else 0.0
+    a1 = weights[1] if m > 1 else 0.0
+    a2 = weights[2] if m > 2 else 0.0
+    a3 = weights[3] if m > 3 else 0.0
     for i in range(n):
+        w = W[i, : i + 1]
+        x = X[i, : i + 1]
+        row = 0.0
         for j in range(i + 1):
-            w = W[i, j]
-            a2 = w.real * w.real + w.imag * w.imag
-            acc += a2 if j == i else 2.0 * a2
-            v = w
-            if m > 0:
-                e = weights[0] * H[order[0], i, j]
-                for q in range(1, m):
-                    e = e + weights[q] * H[order[q], i, j]
-                v = w + e
-                if j == i:
-                    v = 0.5 * (v + s * v.conjugate())
-            X[i, j] = v
+            row += w[j].real * w[j].real + w[j].imag * w[j].imag
+        d = W[i, i]
+        acc += 2.0 * row - (d.real * d.real + d.imag * d.imag)
+        if m == 0:
+            for j in range(i + 1):
+                x[j] = w[j]
+            continue
+        h0 = H[order[0], i, : i + 1]
+        if m == 1:
+            for j in range(i + 1):
+                x[j] = w[j] + a0 * h0[j]
+        elif m == 2:
+            h1 = H[order[1], i, : i + 1]
+            for j in range(i + 1):
+                x[j] = w[j] + (a0 * h0[j] + a1 * h1[j])
+        elif m == 3:
+            h1 = H[order[1], i, : i + 1]
+            h2 = H[order[2], i, : i + 1]
+            for j in range(i + 1):
+                x[j] = w[j] + (a0 * h0[j] + a1 * h1[j] + a2 * h2[j])
+        else:
+            h1 = H[order[1], i, : i + 1]
+            h2 = H[order[2], i, : i + 1]
+            h3 = H[order[3], i, : i + 1]
+            for j in range(i + 1):
+                x[j] = a0 * h0[j] + a1 * h1[j] + a2 * h2[j] + a3 * h3[j]
+            for q in range(4, m):
+                hq = H[order[q], i, : i + 1]
+                aq = weights[q]
+                for j in range(i + 1):
+                    x[j] += aq * hq[j]
+            for j in range(i + 1):
+                x[j] += w[j]
+        v = X[i, i]
+        X[i, i] = 0.5 * (v + s * v.conjugate())
     _mirror_lower(X, s)
     return acc
 
@@ -319,6 +353,8 @@ def isomp_advance_large(
         tot += it
         largest = max(largest, it)
         if status != STATUS_CONVERGED or not finite:
+            for A in (W, Wn, *(H[q] for q in order)):
+                _mirror_lower(A, s)
             fail = StepResult(
                 y=Wn.copy(),
                 stage=X.copy(),
@@ -333,6 +369,8 @@ def isomp_advance_large(
         if extrap:
             order = [free, *order[: K - 1]]
         W, Wn = Wn, W
+    for A in (W, *(H[q] for q in order)):
+        _mirror_lower(A, s)
     # views of this call's ring (never written again): no copies
     new_state = (h, *(H[q] for q in order)) if extrap else None
     return AdvanceResult(W, new_state, n, tot, largest, res_max)
