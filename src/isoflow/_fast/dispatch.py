@@ -257,20 +257,23 @@ def spin_advance(
     offsets: tuple[Array, ...], K: int, extrap: bool, state: Any,
 ) -> AdvanceResult:  # fmt: skip
     """Compiled ``n`` steps of IsoMP (``kind="isomp"``) or the spherical midpoint (``"smm"``)."""
-    from .spin import advance_spin
+    from .spin import advance_spin, to_aos, to_soa
 
     solver = method.solver
     N = y.shape[-2]
     batch = y.shape[:-2]
     M = int(np.prod(batch)) if batch else 1
     par = N >= PARALLEL_MIN_SPINS and _threads() > 1
-    W = np.ascontiguousarray(np.swapaxes(y.reshape(M, N, 3), -1, -2), dtype=np.float64)
-    if np.shares_memory(W, y):  # e.g. one spin: the transpose is a view of the input
-        W = W.copy()
+    W = to_soa(y.reshape(M, N, 3))  # a new array: the input is never written
     hist = np.empty((K + 1, M, 3, N))  # slots are written before they are read
     nh = len(offsets) if extrap else 0
     for q, D in enumerate(offsets[::-1]):
-        hist[q] = np.swapaxes(np.asarray(D, dtype=np.float64).reshape(M, N, 3), -1, -2)
+        Dm = np.asarray(D, dtype=np.float64).reshape(M, N, 3)
+        base = np.swapaxes(Dm, -1, -2)
+        if base.flags.c_contiguous:  # an offset this function returned: a plain copy
+            hist[q] = base
+        else:
+            to_soa(Dm, out=hist[q])
     coefs = _extrap_table(K)
     out = advance_spin(
         kind, W, hist, nh, extrap, coefs, kernel.coupling, h, n, solver.rtol, solver.atol,
@@ -278,7 +281,12 @@ def spin_advance(
     )  # fmt: skip
 
     def back(A: Array) -> Array:
-        return np.ascontiguousarray(np.swapaxes(A, -1, -2)).reshape(*batch, N, 3)
+        return to_aos(A).reshape(*batch, N, 3)
+
+    def offset_view(A: Array) -> Array:
+        # the stored offsets stay in this call's (3, N) buffers (never written again): an
+        # (N, 3) view, no copy; the next call reads them back with a plain copy
+        return np.swapaxes(A, -1, -2).reshape(*batch, N, 3)
 
     y_out = back(out["y"])
     failure = None
@@ -293,7 +301,7 @@ def spin_advance(
         )
     new_state = state
     if out["n_done"] > 0:
-        new_state = (h, *[back(D) for D in out["hist"][::-1]]) if extrap else None
+        new_state = (h, *[offset_view(D) for D in out["hist"][::-1]]) if extrap else None
     return AdvanceResult(
         y=y_out,
         state=new_state,

@@ -35,7 +35,7 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["advance_spin"]
+__all__ = ["advance_spin", "to_aos", "to_soa"]
 
 from ._rules import STATUS_CONVERGED as _CONVERGED
 from ._rules import STATUS_MAX_ITER as _MAX_ITER
@@ -390,6 +390,46 @@ def _drive(  # type: ignore[no-untyped-def]
     totals[1] = it_max
     totals[2] = res_max
     return nsteps, head, nh, swapped
+
+
+@numba.njit(cache=True)
+def _aos_to_soa(src, dst):  # type: ignore[no-untyped-def]
+    """``dst[m, a, i] = src[m, i, a]``: ``(M, N, 3)`` (any strides) into ``(M, 3, N)``.
+
+    NumPy's strided copy of this transpose runs at a fraction of the memory bandwidth (0.4 s
+    for ``N = 1e7``); this loop reads ``src`` in order and writes three unit-stride streams.
+    """
+    for m in range(src.shape[0]):
+        for i in range(src.shape[1]):
+            dst[m, 0, i] = src[m, i, 0]
+            dst[m, 1, i] = src[m, i, 1]
+            dst[m, 2, i] = src[m, i, 2]
+
+
+@numba.njit(cache=True)
+def _soa_to_aos(src, dst):  # type: ignore[no-untyped-def]
+    """``dst[m, i, a] = src[m, a, i]``: ``(M, 3, N)`` into ``(M, N, 3)`` (three unit-stride
+    reads, one sequential write)."""
+    for m in range(src.shape[0]):
+        for i in range(src.shape[2]):
+            dst[m, i, 0] = src[m, 0, i]
+            dst[m, i, 1] = src[m, 1, i]
+            dst[m, i, 2] = src[m, 2, i]
+
+
+def to_soa(y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """A new (or ``out``) ``(M, 3, N)`` float64 array of the particles of ``y`` ``(M, N, 3)``."""
+    if out is None:
+        out = np.empty((y.shape[0], 3, y.shape[1]))
+    _aos_to_soa(np.asarray(y, dtype=np.float64), out)
+    return out
+
+
+def to_aos(A: np.ndarray) -> np.ndarray:
+    """A new C-contiguous ``(M, N, 3)`` array from the ``(M, 3, N)`` layout."""
+    out = np.empty((A.shape[0], A.shape[2], 3))
+    _soa_to_aos(A, out)
+    return out
 
 
 def advance_spin(
