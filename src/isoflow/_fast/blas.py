@@ -104,10 +104,7 @@ def _combine(W, X, P, T, G, s, half, quarter):  # type: ignore[no-untyped-def]
         ie = min(bi + _TILE, n)
         for bj in range(0, bi, _TILE):
             je = bj + _TILE
-            for jj in range(_TILE):
-                src = P[bj + jj, bi:ie]
-                for ii in range(ie - bi):
-                    PT[ii, jj] = src[ii]
+            _load_t(P, bi, ie, bj, je, PT)
             for ii in range(ie - bi):
                 i = bi + ii
                 p_row = P[i, bj:je]
@@ -160,10 +157,7 @@ def _finish(W, X, P, h, s, Wn, D):  # type: ignore[no-untyped-def]
     for bi in range(0, n, _TILE):
         ie = min(bi + _TILE, n)
         for bj in range(0, bi, _TILE):  # full tiles below the diagonal
-            for jj in range(_TILE):
-                src = P[bj + jj, bi:ie]
-                for ii in range(ie - bi):
-                    PT[ii, jj] = src[ii]
+            _load_t(P, bi, ie, bj, bj + _TILE, PT)
             for ii in range(ie - bi):
                 i = bi + ii
                 p_row = P[i, bj : bj + _TILE]

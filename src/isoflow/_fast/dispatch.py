@@ -252,6 +252,38 @@ def _dense_elementwise(
     )
 
 
+def _particle_result(
+    out: dict[str, Any], n: int, h: float, state: Any, extrap: bool, batch: tuple[int, ...],
+    back: Any, offset_back: Any,
+) -> AdvanceResult:  # fmt: skip
+    """The :class:`AdvanceResult` of a compiled particle loop (:mod:`isoflow._fast.spin`,
+    :mod:`isoflow._fast.vortices`): ``back`` maps a state of the loop's layout to the user's
+    ``(*batch, N, 3)``, ``offset_back`` a stored stage offset; the caller's ``state`` is kept
+    when no step was accepted."""
+    failure = None
+    if out["n_done"] != n:
+        failure = StepResult(
+            y=back(out["y_failed"]),
+            stage=back(out["stage"]),
+            iterations=out["iterations"].reshape(batch).copy(),
+            residual=out["residual"].reshape(batch).copy(),
+            status=out["status"].reshape(batch).copy(),
+            state=None,
+        )
+    new_state = state
+    if out["n_done"] > 0:
+        new_state = (h, *[offset_back(D) for D in out["hist"][::-1]]) if extrap else None
+    return AdvanceResult(
+        y=back(out["y"]),
+        state=new_state,
+        n_done=out["n_done"],
+        iterations_total=out["iterations_total"],
+        iterations_max=out["iterations_max"],
+        residual_max=out["residual_max"],
+        failure=failure,
+    )
+
+
 def spin_advance(
     kind: str, method: Any, kernel: SpinNeighbourSum, y: Array, h: float, n: int,
     offsets: tuple[Array, ...], K: int, extrap: bool, state: Any,
@@ -288,29 +320,7 @@ def spin_advance(
         # (N, 3) view, no copy; the next call reads them back with a plain copy
         return np.swapaxes(A, -1, -2).reshape(*batch, N, 3)
 
-    y_out = back(out["y"])
-    failure = None
-    if out["n_done"] != n:
-        failure = StepResult(
-            y=back(out["y_failed"]),
-            stage=back(out["stage"]),
-            iterations=out["iterations"].reshape(batch).copy(),
-            residual=out["residual"].reshape(batch).copy(),
-            status=out["status"].reshape(batch).copy(),
-            state=None,
-        )
-    new_state = state
-    if out["n_done"] > 0:
-        new_state = (h, *[offset_view(D) for D in out["hist"][::-1]]) if extrap else None
-    return AdvanceResult(
-        y=y_out,
-        state=new_state,
-        n_done=out["n_done"],
-        iterations_total=out["iterations_total"],
-        iterations_max=out["iterations_max"],
-        residual_max=out["residual_max"],
-        failure=failure,
-    )
+    return _particle_result(out, n, h, state, extrap, batch, back, offset_view)
 
 
 # ---- point vortices -----------------------------------------------------------------------------
@@ -372,25 +382,4 @@ def vortex_advance(
     def back(A: Array) -> Array:
         return A.reshape(*batch, N, 3)
 
-    failure = None
-    if out["n_done"] != n:
-        failure = StepResult(
-            y=back(out["y_failed"]),
-            stage=back(out["stage"]),
-            iterations=out["iterations"].reshape(batch).copy(),
-            residual=out["residual"].reshape(batch).copy(),
-            status=out["status"].reshape(batch).copy(),
-            state=None,
-        )
-    new_state = state
-    if out["n_done"] > 0:
-        new_state = (h, *[back(D) for D in out["hist"][::-1]]) if extrap else None
-    return AdvanceResult(
-        y=back(out["y"]),
-        state=new_state,
-        n_done=out["n_done"],
-        iterations_total=out["iterations_total"],
-        iterations_max=out["iterations_max"],
-        residual_max=out["residual_max"],
-        failure=failure,
-    )
+    return _particle_result(out, n, h, state, extrap, batch, back, back)
