@@ -206,7 +206,7 @@ def _build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser(
         "bench",
         help="run the benchmark suite (speed as ratios to baselines; JSON + table)",
-        description="Run benchmarks/ 1-6; see 'isoflow bench --help' for its options.",
+        description="Run benchmarks/ 1-7; see 'isoflow bench --help' for its options.",
         add_help=False,
     )
     bench.add_argument("bench_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
