@@ -59,28 +59,31 @@ STATUS_NAMES = {
     STATUS_NON_FINITE: "non_finite",
 }
 
-#: Returned by :func:`stopping_status` while the iteration goes on.
+#: Returned by :func:`stopping_step` while the iteration goes on.
 STATUS_RUNNING = -1
 
 
-def stopping_status(
+def stopping_step(
     r: float, prev: float, first: float, it: int, tol: float, floor: float, divergence: float
-) -> int:
+) -> tuple[int, float, float]:
     """The stopping rules of the module for one member at iteration ``it`` (1-based).
 
     ``r`` is the current residual, ``prev`` the previous one (``inf`` at the first
-    iteration), ``first`` the first one, ``tol = atol + rtol s`` and ``floor = stall_rtol s``.
-    Returns a ``STATUS_*`` code, ``STATUS_RUNNING`` to go on. This one function is the rule
-    everywhere: the Python solvers call it, the compiled kernels of :mod:`isoflow._fast` use
-    a numba compilation of it.
+    iteration), ``first`` the first one (``inf`` before it), ``tol = atol + rtol s`` and
+    ``floor = stall_rtol s``. Returns ``(code, prev, first)``: a ``STATUS_*`` code
+    (``STATUS_RUNNING`` to go on) and the ``prev`` and ``first`` to pass at the next
+    iteration. This one function is the rule everywhere: the Python solvers call it, the
+    compiled kernels of :mod:`isoflow._fast` use a numba compilation of it.
     """
     if not math.isfinite(r):
-        return STATUS_NON_FINITE
-    if r <= tol or (r >= prev and r <= floor):
-        return STATUS_CONVERGED
-    if it > 1 and r > divergence * first:
-        return STATUS_DIVERGED
-    return STATUS_RUNNING
+        code = STATUS_NON_FINITE
+    elif r <= tol or (r >= prev and r <= floor):
+        code = STATUS_CONVERGED
+    elif it > 1 and r > divergence * first:
+        code = STATUS_DIVERGED
+    else:
+        code = STATUS_RUNNING
+    return code, r, (r if it == 1 else first)
 
 
 #: ``G(X, mask) -> (G(X), aux)``. ``mask`` is ``None`` when ``X`` is the whole ensemble
@@ -245,13 +248,12 @@ class NonlinearSolver:
         for it in range(1, self.max_iter + 1):
             GX, aux = prob.G(X, None)
             r = float(np.linalg.norm((GX - X).ravel()))
-            code = stopping_status(r, prev, first, it, tol, floor, self.divergence_factor)
+            code, prev, first = stopping_step(
+                r, prev, first, it, tol, floor, self.divergence_factor
+            )
             if code != STATUS_RUNNING:
                 status = code
                 break
-            if it == 1:
-                first = r
-            prev = r
             X = self._update(prob, X, GX, None)
         assert aux is not None
         return NonlinearResult(

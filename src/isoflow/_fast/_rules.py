@@ -1,6 +1,6 @@
 """The stopping rules of :mod:`isoflow.nonlinear`, compiled for the kernels.
 
-The kernels call :data:`stopping_status`, a numba compilation (inlined) of the very function
+The kernels call :data:`stopping_step`, a numba compilation (inlined) of the very function
 the Python solvers use, so there is one statement of the rules.
 """
 
@@ -15,7 +15,7 @@ from ..nonlinear import (
     STATUS_NON_FINITE,
     STATUS_RUNNING,
 )
-from ..nonlinear import stopping_status as _stopping_status
+from ..nonlinear import stopping_step as _stopping_step
 
 __all__ = [
     "STATUS_CONVERGED",
@@ -23,7 +23,7 @@ __all__ = [
     "STATUS_MAX_ITER",
     "STATUS_NON_FINITE",
     "STATUS_RUNNING",
-    "stopping_status",
+    "stopping_step",
 ]
 
-stopping_status = numba.njit(cache=True, inline="always")(_stopping_status)
+stopping_step = numba.njit(cache=True, inline="always")(_stopping_step)

@@ -45,7 +45,7 @@ from ..nonlinear import (
     STATUS_CONVERGED,
     STATUS_MAX_ITER,
     STATUS_RUNNING,
-    stopping_status,
+    stopping_step,
 )
 from ..problems import IsospectralProblem
 
@@ -332,13 +332,12 @@ def isomp_advance_large(
             np.matmul(B, X, out=P)
             lower_product(P, B, T, blocks)
             r = math.sqrt(_combine(W, X, P, T, G, s, half, quarter))
-            code = stopping_status(r, prev, first, it, tol, floor, solver.divergence_factor)
+            code, prev, first = stopping_step(
+                r, prev, first, it, tol, floor, solver.divergence_factor
+            )
             if code != STATUS_RUNNING:
                 status = code
                 break
-            if it == 1:
-                first = r
-            prev = r
             X, G = G, X
         free = next(q for q in range(H.shape[0]) if q not in order[:K])
         finite = _finish(W, X, P, float(h), s, Wn, H[free])

@@ -33,7 +33,7 @@ __all__ = ["advance_elementwise"]
 
 from ._rules import STATUS_CONVERGED as _CONVERGED
 from ._rules import STATUS_MAX_ITER as _MAX_ITER
-from ._rules import STATUS_RUNNING, stopping_status
+from ._rules import STATUS_RUNNING, stopping_step
 
 #: Reassociation and fused multiply-add: vectorized products and residual sums. Results differ
 #: from the NumPy path (BLAS) only by rounding, as two BLAS builds would.
@@ -117,13 +117,10 @@ def _member_step(  # type: ignore[no-untyped-def]
                 P[i, j] = a  # P is free now: store the projected G
                 P[j, i] = b2
         r = math.sqrt(rr)
-        code = stopping_status(r, prev, first, it, tol, floor, divf)
+        code, prev, first = stopping_step(r, prev, first, it, tol, floor, divf)
         if code != STATUS_RUNNING:
             status = code
             break
-        if it == 1:
-            first = r
-        prev = r
         for i in range(n):
             for j in range(n):
                 X[i, j] = P[i, j]
@@ -406,14 +403,12 @@ def _block_step(  # type: ignore[no-untyped-def]
             r = math.sqrt(rr[q])
             its[q] = it
             res[q] = r
-            code = stopping_status(r, prev[q], first[q], it, tol[q], floor[q], divf)
+            code, prev[q], first[q] = stopping_step(
+                r, prev[q], first[q], it, tol[q], floor[q], divf
+            )
             if code != STATUS_RUNNING:
                 stat[q] = code
                 going[q] = False
-            else:
-                if it == 1:
-                    first[q] = r
-                prev[q] = r
         for i in range(n):
             for j in range(n):
                 for q in range(L):

@@ -39,7 +39,7 @@ __all__ = ["advance_spin", "to_aos", "to_soa"]
 
 from ._rules import STATUS_CONVERGED as _CONVERGED
 from ._rules import STATUS_MAX_ITER as _MAX_ITER
-from ._rules import STATUS_RUNNING, stopping_status
+from ._rules import STATUS_RUNNING, stopping_step
 
 _ISOMP, _SMM = 0, 1
 #: Reassociation (and no signed zeros) only: lets LLVM vectorize the residual reductions
@@ -351,13 +351,10 @@ def _drive(  # type: ignore[no-untyped-def]
                 else:
                     rr = _sweep_ser(kind, cur, Wm, nxt, m, c, half, quarter)
                 r = math.sqrt(rr)
-                code = stopping_status(r, prev, first, it, tol, floor, divf)
+                code, prev, first = stopping_step(r, prev, first, it, tol, floor, divf)
                 if code != STATUS_RUNNING:
                     status = code
                     break
-                if it == 1:
-                    first = r
-                prev = r
                 cur, nxt = nxt, cur
                 in_x = not in_x
             if not in_x:

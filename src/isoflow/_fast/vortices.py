@@ -63,7 +63,7 @@ import numpy as np
 
 from ._rules import STATUS_CONVERGED as _CONVERGED
 from ._rules import STATUS_MAX_ITER as _MAX_ITER
-from ._rules import STATUS_RUNNING, stopping_status
+from ._rules import STATUS_RUNNING, stopping_step
 
 __all__ = ["advance_vortices"]
 
@@ -277,13 +277,10 @@ def _member(  # type: ignore[no-untyped-def]
         else:
             rr = _smm_sweep(buf, src, dst, iw, mm, circ, c, half)
         r = math.sqrt(rr)
-        code = stopping_status(r, prev, first, it, tol, floor, divf)
+        code, prev, first = stopping_step(r, prev, first, it, tol, floor, divf)
         if code != STATUS_RUNNING:
             status = code
             break
-        if it == 1:
-            first = r
-        prev = r
         src, dst = dst, src
     if src != _X:  # the accepted iterate lives in G: bring it home
         for a in range(3):
