@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -10,6 +11,7 @@ from numpy.typing import NDArray
 
 import isoflow as iso
 from isoflow.algebras import Algebra
+from isoflow.methods._base import AdvanceResult, Method
 
 Array = NDArray[Any]
 
@@ -120,3 +122,9 @@ def spectrum_backward_error(W0: Array, W1: Array) -> float:
     cost = np.abs(e0[:, None] - e1[None, :])
     r, c = linear_sum_assignment(cost)
     return float(np.max(cost[r, c] / kappa[r]))
+
+
+def numpy_advance(method, problem, y, h, n, state=None) -> AdvanceResult:
+    """The reference of the fast-path tests: the generic Python loop over ``step`` on the
+    problem without its compiled kernel."""
+    return Method.advance(method, dataclasses.replace(problem, kernel=None), y, h, n, state)

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 import isoflow as iso
+from helpers import numpy_advance
 from isoflow._fast import ElementwiseLinear, SpinNeighbourSum, dispatch
-from isoflow.methods._base import AdvanceResult, Method
+from isoflow.methods._base import AdvanceResult
 from isoflow.threads import available_cores, current_threads, thread_limits
 
 TOL = 1e-13
@@ -34,12 +35,6 @@ def run_isolated(name: str) -> None:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-
-
-def numpy_advance(method, problem, y, h, n, state=None) -> AdvanceResult:
-    """The reference: the generic Python loop over ``step`` without the kernel."""
-    plain = dataclasses.replace(problem, kernel=None)
-    return Method.advance(method, plain, y, h, n, state)
 
 
 def assert_same(a: AdvanceResult, b: AdvanceResult, iters_exact: bool = True) -> None:

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import isoflow as iso
+from helpers import numpy_advance
 from isoflow._fast import dispatch, vortices
 from isoflow._fast.kernels import PairwiseVortex
 from isoflow.methods._base import AdvanceResult, Method
@@ -25,11 +26,6 @@ TOL = 1e-13
 
 
 # ---- helpers ------------------------------------------------------------------------------------
-def numpy_advance(method, problem, y, h, n, state=None) -> AdvanceResult:
-    """The reference: the generic Python loop over ``step`` without the kernel."""
-    return Method.advance(method, dataclasses.replace(problem, kernel=None), y, h, n, state)
-
-
 def assert_same(a: AdvanceResult, b: AdvanceResult) -> None:
     """Same steps, iterations, failure and state; arrays to ``TOL`` relative to ``max |y|``."""
     assert a.n_done == b.n_done
