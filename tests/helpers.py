@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 import isoflow as iso
 from isoflow.algebras import Algebra
 from isoflow.methods._base import AdvanceResult, Method
+from isoflow.nonlinear import STATUS_CONVERGED
 
 Array = NDArray[Any]
 
@@ -128,3 +129,37 @@ def numpy_advance(method, problem, y, h, n, state=None) -> AdvanceResult:
     """The reference of the fast-path tests: the generic Python loop over ``step`` on the
     problem without its compiled kernel."""
     return Method.advance(method, dataclasses.replace(problem, kernel=None), y, h, n, state)
+
+
+#: Agreement of a fast path with the NumPy path, relative to ``max(1, max |y|)``.
+FAST_TOL = 1e-13
+
+
+def assert_same(a: AdvanceResult, b: AdvanceResult, iters_exact: bool = True) -> None:
+    """A fast path's result ``a`` equals the NumPy path's ``b``: same accepted steps, states
+    and stored offsets to :data:`FAST_TOL`, same failure (status, iterations and, for the
+    members that converged, the rejected step's state) and iteration counts (exact, or within
+    1% when a residual may land on the tolerance and cost one iteration more or less)."""
+    assert a.n_done == b.n_done
+    scale = max(1.0, float(np.max(np.abs(b.y))))
+    assert a.y.shape == b.y.shape
+    assert np.max(np.abs(a.y - b.y)) <= FAST_TOL * scale
+    if iters_exact:
+        assert a.iterations_total == b.iterations_total
+        assert a.iterations_max == b.iterations_max
+    else:
+        assert abs(a.iterations_total - b.iterations_total) <= max(2, b.iterations_total // 100)
+    assert (a.failure is None) == (b.failure is None)
+    if a.failure is not None and b.failure is not None:
+        np.testing.assert_array_equal(a.failure.status, b.failure.status)
+        np.testing.assert_array_equal(a.failure.iterations, b.failure.iterations)
+        ok = np.asarray(b.failure.status == STATUS_CONVERGED)
+        if ok.any():  # the members that converged took the same step
+            assert np.max(np.abs(a.failure.y[ok] - b.failure.y[ok])) <= FAST_TOL * scale
+    if b.state is None:
+        assert a.state is None
+    else:
+        assert len(a.state) == len(b.state) and a.state[0] == b.state[0]
+        for x, y in zip(a.state[1:], b.state[1:], strict=True):
+            assert x.shape == y.shape
+            assert np.max(np.abs(x - y)) <= FAST_TOL * scale

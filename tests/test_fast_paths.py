@@ -15,12 +15,10 @@ import numpy as np
 import pytest
 
 import isoflow as iso
-from helpers import numpy_advance
+from helpers import FAST_TOL as TOL
+from helpers import assert_same, numpy_advance
 from isoflow._fast import ElementwiseLinear, SpinNeighbourSum, dispatch
-from isoflow.methods._base import AdvanceResult
 from isoflow.threads import available_cores, current_threads, thread_limits
-
-TOL = 1e-13
 
 
 def run_isolated(name: str) -> None:
@@ -35,28 +33,6 @@ def run_isolated(name: str) -> None:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-
-
-def assert_same(a: AdvanceResult, b: AdvanceResult, iters_exact: bool = True) -> None:
-    assert a.n_done == b.n_done
-    scale = max(1.0, float(np.max(np.abs(b.y))))
-    assert np.max(np.abs(a.y - b.y)) <= TOL * scale
-    if iters_exact:
-        assert a.iterations_total == b.iterations_total
-        assert a.iterations_max == b.iterations_max
-    else:  # a residual landing on the tolerance may cost one iteration more or less
-        assert abs(a.iterations_total - b.iterations_total) <= max(2, b.iterations_total // 100)
-    assert (a.failure is None) == (b.failure is None)
-    if a.failure is not None and b.failure is not None:
-        np.testing.assert_array_equal(a.failure.status, b.failure.status)
-        np.testing.assert_array_equal(a.failure.iterations, b.failure.iterations)
-    if b.state is None:
-        assert a.state is None
-    else:
-        assert len(a.state) == len(b.state) and a.state[0] == b.state[0]
-        for x, y in zip(a.state[1:], b.state[1:], strict=True):
-            assert x.shape == y.shape
-            assert np.max(np.abs(x - y)) <= TOL * scale
 
 
 def rigid(n: int = 10):

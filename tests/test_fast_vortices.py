@@ -16,40 +16,15 @@ import numpy as np
 import pytest
 
 import isoflow as iso
-from helpers import numpy_advance
+from helpers import FAST_TOL as TOL
+from helpers import assert_same, numpy_advance
 from isoflow._fast import dispatch, vortices
 from isoflow._fast.kernels import PairwiseVortex
-from isoflow.methods._base import AdvanceResult, Method
+from isoflow.methods._base import Method
 from isoflow.nonlinear import STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE
-
-TOL = 1e-13
 
 
 # ---- helpers ------------------------------------------------------------------------------------
-def assert_same(a: AdvanceResult, b: AdvanceResult) -> None:
-    """Same steps, iterations, failure and state; arrays to ``TOL`` relative to ``max |y|``."""
-    assert a.n_done == b.n_done
-    scale = max(1.0, float(np.max(np.abs(b.y))))
-    assert a.y.shape == b.y.shape
-    assert np.max(np.abs(a.y - b.y)) <= TOL * scale
-    assert a.iterations_total == b.iterations_total
-    assert a.iterations_max == b.iterations_max
-    assert (a.failure is None) == (b.failure is None)
-    if a.failure is not None and b.failure is not None:
-        np.testing.assert_array_equal(a.failure.status, b.failure.status)
-        np.testing.assert_array_equal(a.failure.iterations, b.failure.iterations)
-        ok = np.asarray(b.failure.status == STATUS_CONVERGED)
-        if ok.any():  # the members that converged took the same step
-            assert np.max(np.abs(a.failure.y[ok] - b.failure.y[ok])) <= TOL * scale
-    if b.state is None:
-        assert a.state is None
-    else:
-        assert len(a.state) == len(b.state) and a.state[0] == b.state[0]
-        for x, y in zip(a.state[1:], b.state[1:], strict=True):
-            assert x.shape == y.shape
-            assert np.max(np.abs(x - y)) <= TOL * scale
-
-
 def sphere(N: int, seed: int = 0, batch: tuple[int, ...] = ()):
     """``N`` random vortices on the sphere (mixed signs), kept apart."""
     rng = np.random.default_rng(seed)
