@@ -25,14 +25,16 @@ from ._errors import ShapeError as ShapeError
 from ._errors import StepSizeError as StepSizeError
 from ._errors import TimeSpanError as TimeSpanError
 from ._errors import UnsupportedAlgebraError as UnsupportedAlgebraError
-from ._fast.kernels import ElementwiseLinear as ElementwiseLinear
-from ._fast.kernels import PairwiseVortex as PairwiseVortex
-from ._fast.kernels import SpinNeighbourSum as SpinNeighbourSum
 from ._solve import Solution as Solution
 from ._solve import SolveStats as SolveStats
 from ._solve import solve as solve
 from ._solve import step as step
 from .diagnostics import Diagnostics as Diagnostics
+from .kernels import CompiledB as CompiledB
+from .kernels import ElementwiseLinear as ElementwiseLinear
+from .kernels import Kernel as Kernel
+from .kernels import PairwiseVortex as PairwiseVortex
+from .kernels import SpinNeighbourSum as SpinNeighbourSum
 from .methods import RK4 as RK4
 from .methods import ClassicalMidpoint as ClassicalMidpoint
 from .methods import IsoMP as IsoMP
@@ -56,6 +58,7 @@ from . import registry as registry
 __all__ = [
     "RK4",
     "ClassicalMidpoint",
+    "CompiledB",
     "ConvergenceError",
     "Diagnostics",
     "DtypeError",
@@ -65,6 +68,7 @@ __all__ = [
     "IsoMP",
     "IsoflowError",
     "IsospectralProblem",
+    "Kernel",
     "Method",
     "Newton",
     "NonFiniteError",

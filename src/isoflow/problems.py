@@ -10,8 +10,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._errors import InvalidBError
-from ._fast.kernels import ElementwiseLinear, FastKernel, PairwiseVortex, SpinNeighbourSum
 from .algebras import Algebra
+from .kernels import Kernel
 
 __all__ = ["IsospectralProblem"]
 
@@ -24,11 +24,12 @@ class IsospectralProblem:
 
     Parameters
     ----------
-    B : callable
+    B : callable, optional
         ``B(W)`` for ``W`` of shape ``(*batch, *algebra.shape)``, returning an array of shape
         ``(*batch, *algebra.normalizer.shape)`` with values in ``algebra.normalizer``. It must
         broadcast over leading axes (write ``np.swapaxes(W, -1, -2)``, not ``W.T``) unless
-        ``vectorized=False``.
+        ``vectorized=False``. May be omitted when ``kernel`` is given: ``B`` then evaluates
+        the kernel's compiled function member by member (write ``B`` once).
     algebra : Algebra
         The space ``V`` (``iso.algebras.so(n)``, ...).
     hamiltonian : callable, optional
@@ -48,21 +49,17 @@ class IsospectralProblem:
         Name used in messages and output files.
     parameters : mapping
         The model parameters, recorded with results.
-    kernel : ElementwiseLinear, SpinNeighbourSum, PairwiseVortex or None
-        Optional compiled description of the *same* ``B`` (see :mod:`isoflow._fast.kernels`):
-        ``ElementwiseLinear(C)`` for :math:`B(W) = C\circ W` on ``so(n)``, ``u(n)``, ``Sym(n)``,
-        ``Herm(n)``; ``SpinNeighbourSum(c)`` for :math:`B_i = c\,(w_{i-1} + w_{i+1})` on
-        :math:`(\mathbb{R}^3,\times)^N`; ``PairwiseVortex(Gamma, geometry)`` for the point-vortex
-        field :math:`B_i = c \sum_{j \ne i} \Gamma_j f(w_i \cdot w_j)\, w_j` on
-        :math:`(\mathbb{R}^3,\times)^N` (``"sphere"``) or :math:`(\mathbb{R}^3,\times_L)^N`
-        (``"hyperbolic"``). When set, :class:`~isoflow.IsoMP` and
-        :class:`~isoflow.SphericalMidpoint` with the default fixed-point solver run the whole
-        time loop in compiled code (same answer, same iteration counts as the NumPy path to
-        rounding). ``None`` (default): the general NumPy path.
+    kernel : Kernel or None
+        Compiled description of the *same* ``B`` (:mod:`isoflow.kernels`): your own
+        ``CompiledB(f, args)``, or a built-in ``ElementwiseLinear``, ``SpinNeighbourSum``,
+        ``PairwiseVortex``. With a kernel, :func:`~isoflow.solve` runs the time loop in
+        compiled code wherever the method and solver have a compiled path (same answer and
+        iteration counts as the NumPy path to rounding). When both ``B`` and ``kernel`` are
+        given they must agree (checked at the initial state when a run starts).
     """
 
-    B: Callable[[Array], Array]
-    algebra: Algebra
+    B: Callable[[Array], Array] = None  # type: ignore[assignment]
+    algebra: Algebra = None  # type: ignore[assignment]
     hamiltonian: Callable[[Array], Array] | None = None
     B_jvp: Callable[[Array, Array], Array] | None = None
     lyapunov: Callable[[Array], Array] | None = None
@@ -70,23 +67,27 @@ class IsospectralProblem:
     vectorized: bool = True
     name: str = "isospectral problem"
     parameters: Mapping[str, Any] = field(default_factory=dict)
-    kernel: FastKernel | None = None
+    kernel: Kernel | None = None
 
     def __post_init__(self) -> None:
-        if self.kernel is not None and not isinstance(
-            self.kernel, (ElementwiseLinear, SpinNeighbourSum, PairwiseVortex)
-        ):
-            raise TypeError(
-                "kernel must be an isoflow fast kernel (ElementwiseLinear, SpinNeighbourSum, "
-                f"PairwiseVortex) or None, got {self.kernel!r}"
-            )
-        if not callable(self.B):
-            raise TypeError(f"B must be callable, got {type(self.B).__name__}")
         if not isinstance(self.algebra, Algebra):
             raise TypeError(
                 "algebra must be an isoflow Algebra (e.g. iso.algebras.so(3)), "
                 f"got {self.algebra!r}"
             )
+        if self.kernel is not None:
+            if not isinstance(self.kernel, Kernel):
+                raise TypeError(
+                    "kernel must be an isoflow kernel (iso.CompiledB(f), ElementwiseLinear, "
+                    f"SpinNeighbourSum, PairwiseVortex) or None, got {self.kernel!r}"
+                )
+            self.kernel.check(self.algebra)
+        if self.B is None:
+            if self.kernel is None:
+                raise TypeError("give B, or a kernel (e.g. iso.CompiledB(f)) to derive it from")
+            object.__setattr__(self, "B", self.kernel.python_B(self.algebra))
+        if not callable(self.B):
+            raise TypeError(f"B must be callable, got {type(self.B).__name__}")
 
     # ---- evaluation ---------------------------------------------------------------------
     def evaluate_B(self, W: Array) -> Array:
@@ -148,7 +149,7 @@ class IsospectralProblem:
             raise InvalidBError("B returned non-finite values (NaN or Inf)")
         outc = out.astype(norm_alg.dtype, copy=False)
         if self.kernel is not None:
-            fast = np.asarray(self.kernel.evaluate(W))
+            fast = np.asarray(self.kernel.evaluate(W, alg))
             gap = float(np.max(np.abs(fast - outc))) if fast.shape == outc.shape else np.inf
             if not gap <= 1e-12 * max(1.0, float(np.max(np.abs(outc)))):
                 raise InvalidBError(

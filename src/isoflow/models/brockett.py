@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import DtypeError, NonFiniteError, ParameterError, ShapeError
-from .._fast.kernels import ElementwiseLinear
 from ..algebras import herm
+from ..kernels import ElementwiseLinear
 from ..problems import IsospectralProblem
 from ._checks import check_n
 

@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
-from .._fast.kernels import SpinNeighbourSum
 from ..algebras.spin import SpinVectors, dot
+from ..kernels import SpinNeighbourSum
 from ..problems import IsospectralProblem
 
 __all__ = ["heisenberg_chain", "paper_spin_curve"]

@@ -16,8 +16,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import NotInSpaceError, ParameterError, ShapeError
-from .._fast.kernels import PairwiseVortex
 from ..algebras.sl2_vectors import L_DIAG, SL2Vectors
+from ..kernels import PairwiseVortex
 from ..problems import IsospectralProblem
 from ._checks import real_parameter
 

@@ -9,8 +9,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import NotInSpaceError, ParameterError
-from .._fast.kernels import PairwiseVortex
 from ..algebras.spin import SpinVectors
+from ..kernels import PairwiseVortex
 from ..problems import IsospectralProblem
 from .hyperbolic_vortices import _check_separated, _check_vortex_input
 

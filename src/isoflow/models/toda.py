@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError, ShapeError
-from .._fast.kernels import ElementwiseLinear
 from ..algebras import sym
+from ..kernels import ElementwiseLinear
 from ..problems import IsospectralProblem
 from ._checks import check_n, real_parameter
 

@@ -1,0 +1,143 @@
+r"""The compiled field functions ``f(W, out, *args)`` of the built-in kernels.
+
+Each evaluates ``B`` for one system (see :mod:`isoflow.kernels` for the protocol). Imported on
+first use: importing :mod:`isoflow` does not load numba.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = [
+    "apply_field",
+    "elementwise",
+    "elementwise_in_frame",
+    "neighbour_sum",
+    "vortex_hyperbolic",
+    "vortex_sphere",
+]
+
+
+@numba.njit(cache=True)
+def apply_field(f, args, W, out):  # type: ignore[no-untyped-def]
+    """``f(W[m], out[m], *args)`` for every member ``m`` of the stacked states ``W``."""
+    for m in range(W.shape[0]):
+        f(W[m], out[m], *args)
+
+
+@numba.njit(cache=True)
+def elementwise(W, out, C):  # type: ignore[no-untyped-def]
+    r"""``out = C \circ W``."""
+    n = W.shape[0]
+    for i in range(n):
+        for j in range(W.shape[1]):
+            out[i, j] = C[i, j] * W[i, j]
+
+
+@numba.njit(cache=True)
+def elementwise_in_frame(W, out, C, U, Uh):  # type: ignore[no-untyped-def]
+    r"""``out = U (C \circ (U^\dagger W U)) U^\dagger`` (written-out products, any dtypes)."""
+    n = W.shape[0]
+    A = np.zeros((n, n), dtype=out.dtype)
+    for i in range(n):  # A = Uh W
+        for k in range(n):
+            a = Uh[i, k]
+            for j in range(n):
+                A[i, j] += a * W[k, j]
+    Bm = np.zeros((n, n), dtype=out.dtype)
+    for i in range(n):  # Bm = C * (A U)
+        for k in range(n):
+            a = A[i, k]
+            for j in range(n):
+                Bm[i, j] += a * U[k, j]
+        for j in range(n):
+            Bm[i, j] *= C[i, j]
+    for i in range(n):  # A = U Bm
+        for j in range(n):
+            A[i, j] = 0.0
+        for k in range(n):
+            a = U[i, k]
+            for j in range(n):
+                A[i, j] += a * Bm[k, j]
+    for i in range(n):  # out = A Uh
+        for j in range(n):
+            out[i, j] = 0.0
+        for k in range(n):
+            a = A[i, k]
+            for j in range(n):
+                out[i, j] += a * Uh[k, j]
+
+
+@numba.njit(cache=True)
+def neighbour_sum(W, out, c):  # type: ignore[no-untyped-def]
+    r"""``out_i = c (w_{i-1} + w_{i+1})``, periodic, on ``(N, 3)``."""
+    N = W.shape[0]
+    for i in range(N):
+        im = i - 1 if i > 0 else N - 1
+        ip = i + 1 if i < N - 1 else 0
+        for a in range(3):
+            out[i, a] = c * (W[im, a] + W[ip, a])
+
+
+@numba.njit(cache=True, error_model="numpy")
+def vortex_sphere(W, out, circ, c):  # type: ignore[no-untyped-def]
+    r"""``out_i = c \sum_{j \ne i} \Gamma_j w_j / (1 - w_i \cdot w_j)`` on ``(N, 3)``.
+
+    One pass over the pairs ``i < j`` (the factor is symmetric); each ``out_i`` sums its terms
+    in the order ``j = 0, 1, ..., N-1``. A coinciding pair gives ``inf`` (then ``non_finite``).
+    """
+    N = W.shape[0]
+    for i in range(N):
+        out[i, 0] = 0.0
+        out[i, 1] = 0.0
+        out[i, 2] = 0.0
+    for i in range(N):
+        xi0, xi1, xi2 = W[i, 0], W[i, 1], W[i, 2]
+        gi = circ[i]
+        s0, s1, s2 = out[i, 0], out[i, 1], out[i, 2]
+        for j in range(i + 1, N):
+            xj0, xj1, xj2 = W[j, 0], W[j, 1], W[j, 2]
+            q = 1.0 / (1.0 - (xi0 * xj0 + xi1 * xj1 + xi2 * xj2))
+            a = circ[j] * q
+            s0 += a * xj0
+            s1 += a * xj1
+            s2 += a * xj2
+            a = gi * q
+            out[j, 0] += a * xi0
+            out[j, 1] += a * xi1
+            out[j, 2] += a * xi2
+        out[i, 0] = c * s0
+        out[i, 1] = c * s1
+        out[i, 2] = c * s2
+
+
+@numba.njit(cache=True, error_model="numpy")
+def vortex_hyperbolic(W, out, circ, c):  # type: ignore[no-untyped-def]
+    r"""``out_i = c \sum_{j \ne i} \Gamma_j w_j / ((D_{ij} - 1)(D_{ij} + 1))``,
+    :math:`D_{ij} = w_i \cdot_L w_j`, on ``(N, 3)`` (pairs ``i < j`` once, as
+    :func:`vortex_sphere`)."""
+    N = W.shape[0]
+    for i in range(N):
+        out[i, 0] = 0.0
+        out[i, 1] = 0.0
+        out[i, 2] = 0.0
+    for i in range(N):
+        xi0, xi1, xi2 = W[i, 0], W[i, 1], W[i, 2]
+        gi = circ[i]
+        s0, s1, s2 = out[i, 0], out[i, 1], out[i, 2]
+        for j in range(i + 1, N):
+            xj0, xj1, xj2 = W[j, 0], W[j, 1], W[j, 2]
+            d = xi0 * xj0 + xi1 * xj1 - xi2 * xj2
+            q = 1.0 / ((d - 1.0) * (d + 1.0))
+            a = circ[j] * q
+            s0 += a * xj0
+            s1 += a * xj1
+            s2 += a * xj2
+            a = gi * q
+            out[j, 0] += a * xi0
+            out[j, 1] += a * xi1
+            out[j, 2] += a * xi2
+        out[i, 0] = c * s0
+        out[i, 1] = c * s1
+        out[i, 2] = c * s2
