@@ -7,6 +7,7 @@ import pytest
 
 import isoflow as iso
 from helpers import initial_state, random_problem
+from isoflow._solve import RUN_FAILED
 
 SOLVERS = {
     "fixed_point": iso.FixedPoint(),
@@ -76,7 +77,7 @@ def test_throw_false_returns_partial_solution() -> None:
     prob = iso.IsospectralProblem(B=B, algebra=alg)
     W0 = initial_state(alg, 6)
     sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=100, save_every=3, throw=False)
-    assert not sol.success and sol.status == -1
+    assert not sol.success and sol.status == RUN_FAILED
     assert "did not converge" in sol.message
     assert 1 < len(sol.ts) < 35
     # the last saved state is the last good state, at its own time

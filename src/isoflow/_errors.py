@@ -15,6 +15,7 @@ __all__ = [
     "NonFiniteError",
     "NotInSpaceError",
     "ParameterError",
+    "ResultWriteError",
     "ShapeError",
     "StepSizeError",
     "TimeSpanError",
@@ -71,6 +72,13 @@ class InvalidBError(IsoflowError, ValueError):
     """
 
 
+class ResultWriteError(IsoflowError, OSError):
+    """Writing a result file failed (disk full, permissions, ...).
+
+    The run stops; the file keeps the run up to its last checkpoint and can be resumed.
+    """
+
+
 class StepSizeError(IsoflowError, ValueError):
     """The step size is not positive and finite, or does not divide the time span."""
 
@@ -85,7 +93,8 @@ class ConvergenceError(IsoflowError, RuntimeError):
     Attributes
     ----------
     step : int
-        Index of the step that failed (0 for the step from ``t0``).
+        Index of the step that failed (0 for the step from ``t0``, ``k`` for the step from
+        ``t0 + k dt``).
     time : float
         Time at the start of the failed step.
     residual : float

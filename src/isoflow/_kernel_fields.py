@@ -1,29 +1,87 @@
-r"""The compiled field functions ``f(W, out, *args)`` of the built-in kernels.
+r"""The compiled field functions ``f(W, out, *args)`` of the built-in kernels, and calling any.
 
-Each evaluates ``B`` for one system (see :mod:`isoflow.kernels` for the protocol). Imported on
-first use: importing :mod:`isoflow` does not load numba.
+Each field evaluates ``B`` for one system (see :mod:`isoflow.kernels` for the protocol).
+Imported on first use: importing :mod:`isoflow` does not load numba.
+
+Fields are passed to compiled code as *first-class function values* of an explicit type
+(:func:`field_type`: ``void(W, out, *args)`` with C-contiguous 2-d arrays), not as numba
+dispatcher objects: a compiled function that takes a dispatcher argument is specialized on
+that object's identity, which numba's on-disk cache cannot key across processes (every new
+process would compile again and grow the cache). With the function type, a compiled loop is
+specialized only on the argument *types*, so it is compiled once per machine and shared by
+every field of the same signature.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba
 import numpy as np
+from numba import types
+
+from ._errors import InvalidBError
 
 __all__ = [
     "apply_field",
     "elementwise",
     "elementwise_in_frame",
+    "field_type",
     "neighbour_sum",
     "vortex_hyperbolic",
     "vortex_sphere",
 ]
 
 
-@numba.njit(cache=True)
-def apply_field(f, args, W, out):  # type: ignore[no-untyped-def]
-    """``f(W[m], out[m], *args)`` for every member ``m`` of the stacked states ``W``."""
+def field_type(f: Any, args: tuple[Any, ...], dtype: Any, out_dtype: Any) -> Any:
+    """The function type ``void(W, out, *args)`` of a field, with ``f`` compiled for it.
+
+    ``W`` and ``out`` are C-contiguous 2-d arrays of ``dtype`` and ``out_dtype``.
+
+    Raises
+    ------
+    InvalidBError
+        ``f`` does not compile for these argument types (wrong number of arguments, writes a
+        complex value into a real ``out``, ...), with numba's first message.
+    """
+    W_t = types.Array(numba.from_dtype(np.dtype(dtype)), 2, "C")
+    out_t = types.Array(numba.from_dtype(np.dtype(out_dtype)), 2, "C")
+    args_t = numba.typeof(args)
+    sig = types.void(W_t, out_t, *args_t.types)
+    try:
+        f.compile(sig)
+    except Exception as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        name = getattr(f, "__name__", "f")
+        raise InvalidBError(
+            f"the kernel function {name} does not compile for f(W, out, *args) with W: "
+            f"{W_t}, out: {out_t}, args: {args_t}: {first}"
+        ) from exc
+    return types.FunctionType(sig)
+
+
+def _apply(f, args, W, out):  # type: ignore[no-untyped-def]
     for m in range(W.shape[0]):
         f(W[m], out[m], *args)
+
+
+_APPLY: dict[Any, Any] = {}
+
+
+def apply_field(f: Any, args: tuple[Any, ...], W: Any, out: Any) -> None:
+    """``f(W[m], out[m], *args)`` for every member ``m`` of the stacked ``(M, ...)`` states."""
+    f_t = field_type(f, args, W.dtype, out.dtype)
+    args_t = numba.typeof(args)
+    sig = types.none(
+        f_t,
+        args_t,
+        types.Array(numba.from_dtype(W.dtype), 3, "C"),
+        types.Array(numba.from_dtype(out.dtype), 3, "C"),
+    )
+    run = _APPLY.get(sig)
+    if run is None:
+        run = _APPLY[sig] = numba.njit(sig, cache=True)(_apply)
+    run(f, args, np.ascontiguousarray(W), out)
 
 
 @numba.njit(cache=True)

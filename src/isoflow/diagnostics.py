@@ -20,9 +20,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._errors import InvalidBError
 from .problems import IsospectralProblem
 
-__all__ = ["Diagnostics", "DiagnosticsAccumulator", "compute_diagnostics"]
+__all__ = [
+    "Diagnostics",
+    "DiagnosticsAccumulator",
+    "DriftAccumulator",
+    "compute_diagnostics",
+    "series",
+]
 
 Array = NDArray[Any]
 
@@ -73,163 +80,210 @@ class Diagnostics:
         return out
 
 
-def _drift(series: Array, core: int) -> Array:
-    dev = np.abs(series - series[:1])
-    axes = (0, *range(dev.ndim - core, dev.ndim))
-    return np.max(dev, axis=axes)
+def series(problem: IsospectralProblem, ys: Array) -> dict[str, Array]:
+    """Per-state diagnostic series of the states ``ys`` (time first): name -> array.
 
+    ``casimirs``, ``distance`` and, where the problem has them, ``hamiltonian``,
+    ``lyapunov`` and ``invariants/<name>``; each time first, ``(n, *batch, ...)``.
 
-def compute_diagnostics(problem: IsospectralProblem, ts: Array, ys: Array) -> Diagnostics:
-    """Diagnostics of the states ``ys`` (time-first, ``(n_save, *batch, *shape)``) at ``ts``."""
+    Raises
+    ------
+    InvalidBError
+        A ``hamiltonian``, ``lyapunov`` or invariant that returns something that is not a
+        real numeric array of the states' batch shape (for the scalar ones).
+    """
     alg = problem.algebra
-    C = alg.casimirs(ys)
-    scale = alg.casimir_scale(ys[0])
-    casimir_drift = np.max(np.abs(C - C[:1]) / scale, axis=(0, C.ndim - 1))
-    dist = alg.distance(ys)
-    kw: dict[str, Any] = {}
-    if problem.hamiltonian is not None:
-        H = np.real(np.asarray(problem.hamiltonian(ys)))
-        dH = np.max(np.abs(H - H[:1]), axis=0)
-        kw.update(
-            hamiltonian=H,
-            hamiltonian_drift=dH,
-            hamiltonian_relative_drift=dH / np.maximum(np.abs(H[0]), np.finfo(float).tiny),
-        )
-    if problem.lyapunov is not None:
-        L = np.real(np.asarray(problem.lyapunov(ys)))
-        dec = (
-            np.max(np.maximum(L[:-1] - L[1:], 0.0), axis=0) if len(L) > 1 else np.zeros(L.shape[1:])
-        )
-        kw.update(lyapunov=L, lyapunov_max_decrease=dec)
-    inv, inv_drift = {}, {}
-    batch_nd = ys.ndim - 1 - alg.core_ndim
+    batch = ys.shape[: ys.ndim - alg.core_ndim]
+    out: dict[str, Array] = {
+        "casimirs": np.asarray(alg.casimirs(ys)),
+        "distance": np.asarray(alg.distance(ys)),
+    }
+    for name, fn in (("hamiltonian", problem.hamiltonian), ("lyapunov", problem.lyapunov)):
+        if fn is not None:
+            out[name] = _user_series(fn, ys, name, batch, scalar=True)
     for name, fn in problem.invariants.items():
-        series = np.asarray(fn(ys))
-        inv[name] = series
-        inv_drift[name] = _drift(series, series.ndim - 1 - batch_nd)
-    return Diagnostics(
-        ts=ts,
-        casimirs=C,
-        casimir_drift=casimir_drift,
-        distance=dist,
-        max_distance=np.max(dist, axis=0),
-        invariants=inv,
-        invariant_drift=inv_drift,
-        **kw,
-    )
+        out[f"invariants/{name}"] = _user_series(fn, ys, f"invariant {name!r}", batch)
+    return out
 
 
-class DiagnosticsAccumulator:
-    """Incremental :class:`Diagnostics` for streamed runs: bounded memory in the number of states.
+def _user_series(
+    fn: Any, ys: Array, what: str, batch: tuple[int, ...], scalar: bool = False
+) -> Array:
+    """``fn(ys)`` checked: numeric, leading axes ``batch``, real (the real part of a complex
+    value is taken for the scalar functions, as for ``Tr`` forms)."""
+    try:
+        v = np.asarray(fn(ys))
+    except Exception as exc:
+        raise InvalidBError(f"the problem's {what} raised {type(exc).__name__}: {exc}") from exc
+    if v.dtype.kind not in "biufc":
+        raise InvalidBError(f"the problem's {what} returned non-numeric values ({v.dtype})")
+    if v.shape[: len(batch)] != batch or (scalar and v.shape != batch):
+        want = f"{batch}" if scalar else f"({', '.join(map(str, batch))}, ...)"
+        raise InvalidBError(
+            f"the problem's {what} returned shape {v.shape} for states of shape {ys.shape}; "
+            f"expected {want}"
+        )
+    if scalar:
+        v = np.real(v)
+    return v.astype(np.float64) if v.dtype.kind in "biu" else v
 
-    Feed the saved states chunk by chunk, in time order, to :meth:`update`; it returns the
-    per-state series of the chunk (for a writer to store) and keeps only the first state's
-    values, the last Lyapunov value and the running maxima. :meth:`result` gives the same drifts
-    as :func:`compute_diagnostics` on all the states at once (up to the order of the ``max``).
+
+class DriftAccumulator:
+    """The drifts of diagnostic series absorbed chunk by chunk: the one drift implementation.
+
+    Used by :class:`DiagnosticsAccumulator` (runs) and by the readers of result files, which
+    absorb the stored series. Keeps the first state's values, the last Lyapunov value and the
+    running maxima; memory does not grow with the number of states.
 
     Parameters
     ----------
-    problem : IsospectralProblem
+    casimir_scale : array_like
+        Per-member, per-component scale of the Casimirs (:meth:`Algebra.casimir_scale` of the
+        first state), to make their drift relative.
+    batch_ndim : int
+        Number of ensemble axes of the states.
     """
 
-    def __init__(self, problem: IsospectralProblem) -> None:
-        self.problem = problem
-        self._first: dict[str, Any] | None = None
-        self._last: dict[str, Any] = {}
-        self._max: dict[str, Array] = {}
+    def __init__(self, casimir_scale: Any, batch_ndim: int) -> None:
+        self.scale = np.asarray(casimir_scale, dtype=float)
+        self.batch_ndim = int(batch_ndim)
+        self.first: dict[str, Array] | None = None
+        self.last: dict[str, Array] = {}
+        self.max: dict[str, Array] = {}
         self._lyap_last: Array | None = None
-        self._scale: Array | None = None
-        self._batch_nd: int | None = None
-        self._t_first = self._t_last = float("nan")
-
-    def series(self, ys: Array) -> dict[str, Array]:
-        """Per-state diagnostic series of ``ys`` (time first): name -> array, time first."""
-        alg = self.problem.algebra
-        out: dict[str, Array] = {
-            "casimirs": np.asarray(alg.casimirs(ys)),
-            "distance": np.asarray(alg.distance(ys)),
-        }
-        if self.problem.hamiltonian is not None:
-            out["hamiltonian"] = np.real(np.asarray(self.problem.hamiltonian(ys)))
-        if self.problem.lyapunov is not None:
-            out["lyapunov"] = np.real(np.asarray(self.problem.lyapunov(ys)))
-        for name, fn in self.problem.invariants.items():
-            out[f"invariants/{name}"] = np.asarray(fn(ys))
-        return out
-
-    def update(self, ts: Array, ys: Array) -> dict[str, Array]:
-        """Absorb the states ``ys`` at ``ts``; return their series (see :meth:`series`)."""
-        if self._scale is None and len(ys):
-            self._scale = np.asarray(self.problem.algebra.casimir_scale(ys[0]))
-            self._batch_nd = ys.ndim - 1 - self.problem.algebra.core_ndim
-        s = self.series(ys)
-        self.absorb(np.asarray(ts, dtype=float), s)
-        return s
+        self.t_first = self.t_last = float("nan")
+        self.count = 0
 
     def absorb(self, ts: Array, series: dict[str, Array]) -> None:
-        """Absorb already computed series (e.g. read back from a file when resuming)."""
+        """Absorb the series of the states at ``ts`` (time first, in time order)."""
+        ts = np.asarray(ts, dtype=float)
         if len(ts) == 0:
             return
-        if self._first is None:
-            if self._scale is None:
-                raise ValueError("absorb() needs set_first_state() or update() first")
-            self._first = {k: v[:1].copy() for k, v in series.items()}
-            self._t_first = float(ts[0])
-        self._t_last = float(ts[-1])
-        self._last = {k: v[-1:].copy() for k, v in series.items()}
-        first = self._first
-        assert self._batch_nd is not None
+        if self.first is None:
+            self.first = {k: np.array(v[:1], copy=True) for k, v in series.items()}
+            self.t_first = float(ts[0])
+        self.t_last = float(ts[-1])
+        self.count += len(ts)
+        self.last = {k: np.array(v[-1:], copy=True) for k, v in series.items()}
+        first = self.first
         for name, v in series.items():
             if name == "casimirs":
-                dev = np.max(np.abs(v - first[name]) / self._scale, axis=(0, v.ndim - 1))
+                dev = np.max(np.abs(v - first[name]) / self.scale, axis=(0, v.ndim - 1))
             elif name == "distance":
                 dev = np.max(v, axis=0)
             elif name == "lyapunov":
                 prev = v[:1] if self._lyap_last is None else self._lyap_last
                 L = np.concatenate([prev, v])
                 dev = np.max(np.maximum(L[:-1] - L[1:], 0.0), axis=0)
-                self._lyap_last = v[-1:].copy()
-            elif name == "hamiltonian":
-                dev = np.max(np.abs(v - first[name]), axis=0)
+                self._lyap_last = np.array(v[-1:], copy=True)
             else:
-                core = v.ndim - 1 - self._batch_nd
-                dev = _drift(np.concatenate([first[name], v]), core)
-            self._max[name] = dev if name not in self._max else np.maximum(self._max[name], dev)
+                dev = np.abs(v - first[name])
+                core = dev.ndim - 1 - self.batch_ndim
+                dev = np.max(dev, axis=(0, *range(dev.ndim - core, dev.ndim)))
+            self.max[name] = dev if name not in self.max else np.maximum(self.max[name], dev)
+
+    def drifts(self) -> dict[str, Array]:
+        """Per-member drifts: ``casimir_drift``, ``max_distance``, ``hamiltonian_drift``,
+        ``hamiltonian_relative_drift``, ``lyapunov_max_decrease``, ``<name>_drift``."""
+        if self.first is None:
+            raise ValueError("no states absorbed yet")
+        out: dict[str, Array] = {}
+        for name, d in self.max.items():
+            key = {
+                "casimirs": "casimir_drift",
+                "distance": "max_distance",
+                "hamiltonian": "hamiltonian_drift",
+                "lyapunov": "lyapunov_max_decrease",
+            }.get(name, f"{name.split('/', 1)[-1]}_drift")
+            out[key] = d
+        if "hamiltonian" in self.max:
+            h0 = np.abs(self.first["hamiltonian"][0])
+            out["hamiltonian_relative_drift"] = self.max["hamiltonian"] / np.maximum(
+                h0, np.finfo(float).tiny
+            )
+        return out
+
+
+class DiagnosticsAccumulator:
+    """Incremental :class:`Diagnostics` for runs: series per chunk, drifts accumulated.
+
+    Feed the saved states chunk by chunk, in time order, to :meth:`update`; it returns the
+    per-state series of the chunk (for a writer to store). :meth:`result` gives the drifts over
+    every state absorbed and, with ``keep_series=True``, the full time series (else those of
+    the first and the last state only, as for a run streamed to a file).
+
+    Parameters
+    ----------
+    problem : IsospectralProblem
+    keep_series : bool
+        Keep every chunk's series for :meth:`result`.
+    """
+
+    def __init__(self, problem: IsospectralProblem, keep_series: bool = False) -> None:
+        self.problem = problem
+        self.keep_series = keep_series
+        self.drift: DriftAccumulator | None = None
+        self._ts: list[Array] = []
+        self._series: list[dict[str, Array]] = []
 
     def set_first_state(self, y0: Array) -> None:
         """Fix the Casimir scale from the first state (needed before :meth:`absorb`)."""
-        self._scale = np.asarray(self.problem.algebra.casimir_scale(y0))
-        self._batch_nd = y0.ndim - self.problem.algebra.core_ndim
+        alg = self.problem.algebra
+        self.drift = DriftAccumulator(alg.casimir_scale(y0), y0.ndim - alg.core_ndim)
+
+    def update(self, ts: Array, ys: Array) -> dict[str, Array]:
+        """Absorb the states ``ys`` at ``ts``; return their series (see :func:`series`)."""
+        if self.drift is None and len(ys):
+            self.set_first_state(ys[0])
+        s = series(self.problem, ys)
+        self.absorb(np.asarray(ts, dtype=float), s)
+        return s
+
+    def absorb(self, ts: Array, s: dict[str, Array]) -> None:
+        """Absorb already computed series (e.g. read back from a file when resuming)."""
+        if self.drift is None:
+            raise ValueError("absorb() needs set_first_state() or update() first")
+        self.drift.absorb(ts, s)
+        if self.keep_series and len(ts):
+            self._ts.append(np.asarray(ts, dtype=float))
+            self._series.append(s)
 
     def result(self) -> Diagnostics:
-        """Diagnostics with the drifts over every absorbed state.
-
-        The time series it holds are those of the first and the last state only (the full series
-        went to the writer).
-        """
-        if self._first is None:
+        """The :class:`Diagnostics` of every absorbed state (see the class docstring)."""
+        acc = self.drift
+        if acc is None or acc.first is None:
             raise ValueError("no states absorbed yet")
-        ts = np.array([self._t_first, self._t_last])
-        two = {k: np.concatenate([self._first[k], self._last[k]]) for k in self._first}
+        if self.keep_series:
+            ts = np.concatenate(self._ts)
+            full = {k: np.concatenate([c[k] for c in self._series]) for k in self._series[0]}
+        else:
+            ts = np.array([acc.t_first, acc.t_last])
+            full = {k: np.concatenate([acc.first[k], acc.last[k]]) for k in acc.first}
+        d = acc.drifts()
         kw: dict[str, Any] = {}
-        if "hamiltonian" in two:
-            dH = self._max["hamiltonian"]
+        if "hamiltonian" in full:
             kw.update(
-                hamiltonian=two["hamiltonian"],
-                hamiltonian_drift=dH,
-                hamiltonian_relative_drift=dH
-                / np.maximum(np.abs(self._first["hamiltonian"][0]), np.finfo(float).tiny),
+                hamiltonian=full["hamiltonian"],
+                hamiltonian_drift=d["hamiltonian_drift"],
+                hamiltonian_relative_drift=d["hamiltonian_relative_drift"],
             )
-        if "lyapunov" in two:
-            kw.update(lyapunov=two["lyapunov"], lyapunov_max_decrease=self._max["lyapunov"])
-        names = [k.split("/", 1)[1] for k in two if k.startswith("invariants/")]
+        if "lyapunov" in full:
+            kw.update(lyapunov=full["lyapunov"], lyapunov_max_decrease=d["lyapunov_max_decrease"])
+        names = [k.split("/", 1)[1] for k in full if k.startswith("invariants/")]
         return Diagnostics(
             ts=ts,
-            casimirs=two["casimirs"],
-            casimir_drift=self._max["casimirs"],
-            distance=two["distance"],
-            max_distance=self._max["distance"],
-            invariants={n: two[f"invariants/{n}"] for n in names},
-            invariant_drift={n: self._max[f"invariants/{n}"] for n in names},
+            casimirs=full["casimirs"],
+            casimir_drift=d["casimir_drift"],
+            distance=full["distance"],
+            max_distance=d["max_distance"],
+            invariants={n: full[f"invariants/{n}"] for n in names},
+            invariant_drift={n: d[f"{n}_drift"] for n in names},
             **kw,
         )
+
+
+def compute_diagnostics(problem: IsospectralProblem, ts: Array, ys: Array) -> Diagnostics:
+    """Diagnostics of the states ``ys`` (time-first, ``(n_save, *batch, *shape)``) at ``ts``."""
+    acc = DiagnosticsAccumulator(problem, keep_series=True)
+    acc.update(ts, ys)
+    return acc.result()

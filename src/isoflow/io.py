@@ -57,8 +57,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._errors import IsoflowError
-from ._solve import Solution, StreamWriter, _solve_streaming
-from .diagnostics import Diagnostics, DiagnosticsAccumulator
+from ._solve import RunState, Solution, StreamWriter, continue_run
+from ._stepping import MemberFailures
+from .diagnostics import Diagnostics, DiagnosticsAccumulator, DriftAccumulator
 from .methods import Method
 from .problems import IsospectralProblem
 
@@ -232,6 +233,7 @@ class HDF5Writer:
         f = self._f
         assert f is not None
         shape = ys.shape[1:]
+        members = int(np.prod(shape[: len(shape) - len(self._meta_core())], dtype=np.int64))
         row_bytes = max(int(np.prod(shape)) * ys.dtype.itemsize, 1)
         crow = max(1, min(self.chunk_rows, (1 << 20) // row_bytes))
         f.create_dataset("ts", shape=(0,), maxshape=(None,), chunks=(max(crow, 64),), dtype="f8")
@@ -249,11 +251,17 @@ class HDF5Writer:
             slot = cp.create_group(f"slot{i}")
             slot.create_dataset("y", shape=shape, dtype=ys.dtype)
             slot.create_dataset("index", shape=(2,), dtype="i8", data=np.array([-1, 0]))
-            for name in ("state_blob", "state_desc"):
+            slot.create_dataset("failures", shape=(members, 4), dtype="f8")
+            for name in ("state_blob", "state_desc", "failures_msg"):
                 slot.create_dataset(name, shape=(0,), maxshape=(None,), chunks=(4096,), dtype="u1")
         cp.create_dataset("current", shape=(1,), dtype="i8", data=np.array([-1]))
         f.create_dataset("run_info", shape=(0,), maxshape=(None,), chunks=(1024,), dtype="u1")
         f.swmr_mode = True  # from here on: no new objects or attributes, only data and resizes
+
+    def _meta_core(self) -> tuple[int, ...]:
+        """The shape of one member's state (from the run's algebra shape in ``meta``)."""
+        assert self._meta is not None
+        return tuple(self._meta.get("core_shape", self._meta["state_shape"]))
 
     def append(self, ts: Array, ys: Array, series: dict[str, Array]) -> None:
         """Write saved states ``ys`` at ``ts`` and their diagnostics (durable at checkpoint)."""
@@ -273,7 +281,9 @@ class HDF5Writer:
             ds[n0:] = v
         self._n_rows = n0 + m
 
-    def checkpoint(self, step: int, y: Array, method_state: Any) -> None:
+    def checkpoint(
+        self, step: int, y: Array, method_state: Any, failures: MemberFailures | None = None
+    ) -> None:
         """Flush the rows, then write a complete checkpoint into the spare slot and point to it."""
         f = self._f
         assert f is not None
@@ -284,6 +294,16 @@ class HDF5Writer:
         g["y"][...] = y
         _write_bytes(g["state_blob"], blob)
         _write_bytes(g["state_desc"], desc)
+        rec = g["failures"]
+        if failures is None:
+            rec[...] = np.array([-1.0, 0.0, 0.0, 0.0])
+            _write_bytes(g["failures_msg"], b"")
+        else:
+            rec[...] = np.stack(
+                [failures.step, failures.status, failures.iterations, failures.residual], axis=-1
+            )
+            msgs = {str(k): v for k, v in failures.messages.items()}
+            _write_bytes(g["failures_msg"], json.dumps(msgs).encode())
         g["index"][:] = np.array([int(step), self._n_rows])
         f.flush()
         f["checkpoint"]["current"][0] = slot
@@ -408,6 +428,7 @@ class Checkpoint:
     slot: int
     y: Array
     method_state: Any
+    failures: MemberFailures | None = None
 
 
 def _read_checkpoint(f: h5py.File) -> Checkpoint | None:
@@ -419,7 +440,19 @@ def _read_checkpoint(f: h5py.File) -> Checkpoint | None:
     g = f["checkpoint"][f"slot{slot}"]
     step, n_rows = (int(v) for v in g["index"][:])
     state = _unpack_state(_read_bytes(g["state_blob"]), _read_bytes(g["state_desc"]))
-    return Checkpoint(step, n_rows, slot, np.asarray(g["y"][...]), state)
+    failures = None
+    if "failures" in g:
+        rec = np.asarray(g["failures"][...], dtype=float)
+        if np.any(rec[:, 0] >= 0):
+            msg = _read_bytes(g["failures_msg"])
+            failures = MemberFailures(
+                step=rec[:, 0].astype(np.int64),
+                status=rec[:, 1].astype(np.int64),
+                iterations=rec[:, 2].astype(np.int64),
+                residual=rec[:, 3].copy(),
+                messages={int(k): str(v) for k, v in json.loads(msg or b"{}").items()},
+            )
+    return Checkpoint(step, n_rows, slot, np.asarray(g["y"][...]), state, failures)
 
 
 def _read_run_info(f: h5py.File) -> dict[str, Any] | None:
@@ -429,48 +462,21 @@ def _read_run_info(f: h5py.File) -> dict[str, Any] | None:
 
 
 def _accumulate(f: h5py.File, n_rows: int) -> dict[str, Any]:
-    """Drifts over the stored diagnostic series, read chunk by chunk."""
-    acc_max: dict[str, float] = {}
-    first: dict[str, Array] = {}
-    lyap_prev: Array | None = None
+    """Drifts over the stored diagnostic series, read chunk by chunk (worst member)."""
     dsets = {ds.name.split("/diagnostics/", 1)[1]: ds for ds in _series_datasets(f)}
-    scale: Array | None = None
-    if "casimirs" in dsets and n_rows:
-        # the Casimir scale of the first state, as DiagnosticsAccumulator uses
-        meta = json.loads(f.attrs["meta"])
-        scale = np.asarray(meta.get("casimir_scale", 1.0), dtype=float)
+    if not n_rows or not dsets:
+        return {}
+    meta = json.loads(f.attrs["meta"])
+    shape = tuple(meta["state_shape"])
+    core = tuple(meta.get("core_shape", shape[-2:]))
+    acc = DriftAccumulator(meta.get("casimir_scale", 1.0), len(shape) - len(core))
     for start in range(0, n_rows, _READ_CHUNK):
         stop = min(start + _READ_CHUNK, n_rows)
-        for name, ds in dsets.items():
-            v = np.asarray(ds[start:stop])
-            if name not in first:
-                first[name] = v[:1]
-            if name == "distance":
-                d = float(np.max(v))
-            elif name == "lyapunov":
-                prev = v[:1] if lyap_prev is None else lyap_prev
-                L = np.concatenate([prev, v])
-                d = float(np.max(np.maximum(L[:-1] - L[1:], 0.0)))
-                lyap_prev = v[-1:]
-            elif name == "casimirs":
-                assert scale is not None
-                d = float(np.max(np.abs(v - first[name]) / scale))
-            else:
-                d = float(np.max(np.abs(v - first[name])))
-            acc_max[name] = max(acc_max.get(name, 0.0), d)
-    out: dict[str, Any] = {}
-    for name, d in acc_max.items():
-        key = {
-            "casimirs": "casimir_drift",
-            "distance": "max_distance",
-            "hamiltonian": "hamiltonian_drift",
-            "lyapunov": "lyapunov_max_decrease",
-        }.get(name, f"{name.split('/')[-1]}_drift")
-        out[key] = d
-    if "hamiltonian" in first:
-        h0 = float(np.max(np.abs(first["hamiltonian"])))
-        out["hamiltonian_relative_drift"] = acc_max["hamiltonian"] / max(h0, 1e-300)
-    return out
+        acc.absorb(
+            np.asarray(f["ts"][start:stop]),
+            {k: np.asarray(ds[start:stop]) for k, ds in dsets.items()},
+        )
+    return {k: float(np.max(v)) for k, v in acc.drifts().items()}
 
 
 def info(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -665,24 +671,20 @@ def resume(
                 {k: np.asarray(ds[start:stop]) for k, ds in dsets.items()},
             )
     except BaseException:
-        writer.close({"status": -1, "message": "resume failed", "steps_done": cp.step})
+        writer.close({"status": 2, "message": "resume failed", "steps_done": cp.step})
         raise
-    return _solve_streaming(
+    return continue_run(
         problem,
         method,
-        cp.y,
-        cp.method_state,
-        k0=cp.step,
-        n=int(meta["n_steps"]),
+        RunState(cp.step, cp.y, cp.method_state, cp.failures),
         t0=float(meta["t0"]),
         dt=float(meta["dt"]),
+        n_steps=int(meta["n_steps"]),
         save_every=int(meta["save_every"]),
-        progress=progress,
-        throw=throw,
         writer=writer,
         accumulator=acc,
-        diagnostics=True,
-        fresh=False,
+        progress=progress,
+        throw=throw,
     )
 
 

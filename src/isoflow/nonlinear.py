@@ -19,6 +19,25 @@ Rules 3-5 are failures; the caller decides whether to raise
 :class:`~isoflow.ConvergenceError` or to report it. The accepted ``X`` is the last point at which
 ``G`` was evaluated, so the auxiliary output of ``G`` (e.g. the bracket ``[B(X), X]``) belongs to
 exactly that ``X``.
+
+Acceleration
+------------
+:class:`FixedPoint` can mix the last iterates (Anderson acceleration, type II; Walker & Ni,
+SIAM J. Numer. Anal. 49 (2011) 1715–1735). With memory ``m``, residuals
+:math:`f_k = G(X_k) - X_k` and the differences :math:`\Delta f_j = f_{j+1} - f_j`,
+:math:`\Delta G_j = G(X_{j+1}) - G(X_j)` of the last ``m_k = \min(m, k)`` iterations,
+
+.. math::
+
+    \gamma = \arg\min_\gamma \Big\| f_k - \sum_j \gamma_j \Delta f_j \Big\|, \qquad
+    X_{k+1} = G(X_k) - \sum_j \gamma_j\, \Delta G_j ,
+
+with the real inner product of the space, so :math:`\gamma` is real and :math:`X_{k+1}` a
+real combination of values of ``G``: it stays in the stage space. The least-squares problem is
+solved by its normal equations, regularized by ``1e-12`` times the largest diagonal entry. The
+stopping rules above are unchanged (they test :math:`\|f_k\|`); with ``m = 0`` this is the plain
+iteration :math:`X_{k+1} = G(X_k)`. The compiled loops (:mod:`isoflow._compiled`) run the same
+algorithm.
 """
 
 from __future__ import annotations
@@ -32,9 +51,11 @@ import numpy as np
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
+from ._errors import ParameterError
 from .algebras import Algebra
 
 __all__ = [
+    "CONTINUE",
     "STATUS_CONVERGED",
     "STATUS_DIVERGED",
     "STATUS_MAX_ITER",
@@ -59,8 +80,11 @@ STATUS_NAMES = {
     STATUS_NON_FINITE: "non_finite",
 }
 
-#: Returned by :func:`stopping_step` while the iteration goes on.
-STATUS_RUNNING = -1
+#: Returned by :func:`stopping_step` while the iteration goes on (not a status of a result).
+CONTINUE = -1
+
+#: Regularization of Anderson's normal equations, relative to their largest diagonal entry.
+ANDERSON_REGULARIZATION = 1e-12
 
 
 def stopping_step(
@@ -71,7 +95,7 @@ def stopping_step(
     ``r`` is the current residual, ``prev`` the previous one (``inf`` at the first
     iteration), ``first`` the first one (``inf`` before it), ``tol = atol + rtol s`` and
     ``floor = stall_rtol s``. Returns ``(code, prev, first)``: a ``STATUS_*`` code
-    (``STATUS_RUNNING`` to go on) and the ``prev`` and ``first`` to pass at the next
+    (:data:`CONTINUE` to go on) and the ``prev`` and ``first`` to pass at the next
     iteration. This one function is the rule everywhere: the Python solvers call it, the
     compiled kernels of :mod:`isoflow._fast` use a numba compilation of it.
     """
@@ -82,7 +106,7 @@ def stopping_step(
     elif it > 1 and r > divergence * first:
         code = STATUS_DIVERGED
     else:
-        code = STATUS_RUNNING
+        code = CONTINUE
     return code, r, (r if it == 1 else first)
 
 
@@ -160,10 +184,19 @@ class _StoppingRules:
     divergence_factor: float
 
     def check(self) -> None:
-        if not (self.rtol >= 0 and self.atol >= 0 and self.rtol + self.atol > 0):
-            raise ValueError("tolerances must be non-negative and not both zero")
-        if self.max_iter < 1:
-            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
+        for name in ("rtol", "atol", "stall_rtol", "divergence_factor"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise ParameterError(f"{name} must be a real number, got {v!r}")
+            if not math.isfinite(v) or v < 0:
+                raise ParameterError(f"{name} must be finite and non-negative, got {v!r}")
+        if self.rtol + self.atol <= 0:
+            raise ParameterError("tolerances rtol and atol must not both be zero")
+        if self.divergence_factor <= 1:
+            raise ParameterError(f"divergence_factor must be > 1, got {self.divergence_factor!r}")
+        m = self.max_iter
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
+            raise ParameterError(f"max_iter must be an integer >= 1, got {m!r}")
 
 
 class NonlinearSolver:
@@ -175,10 +208,19 @@ class NonlinearSolver:
     stall_rtol: float
     divergence_factor: float
 
+    #: Anderson memory (0: none); :class:`FixedPoint` sets it.
+    anderson: int = 0
+    #: Evaluations of ``G`` per iteration and member beyond the first (Newton's Jacobian).
+    extra_evaluations_per_iteration: int = 0
+
     def _update(
         self, prob: FixedPointProblem, X: Array, GX: Array, mask: Array | None
     ) -> Array:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def evaluations_per_iteration(self, prob: FixedPointProblem) -> int:
+        """Evaluations of ``G`` (hence of ``B``) per iteration and member."""
+        return 1
 
     def solve(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
         """Solve ``X = G(X)`` starting from ``X0`` (not modified)."""
@@ -186,53 +228,66 @@ class NonlinearSolver:
         batch = alg.batch_shape(X0)
         if batch == ():
             return self._solve_single(prob, X0)
-        X = np.array(X0, dtype=alg.dtype, copy=True)
+        core = alg.shape
+        M = int(np.prod(batch))
+        X = np.array(X0, dtype=alg.dtype, copy=True).reshape(M, *core)
+        iters = np.zeros(M, dtype=np.int64)
+        resid = np.full(M, np.inf)
+        status = np.full(M, CONTINUE, dtype=np.int64)
+        first = np.full(M, np.nan)
+        scale = np.broadcast_to(np.asarray(prob.scale, dtype=float), batch).reshape(M)
+        tol = self.atol + self.rtol * scale
+        floor = self.stall_rtol * scale
         aux: Array | None = None
-        iters = np.zeros(batch, dtype=np.int64)
-        resid = np.full(batch, np.inf)
-        status = np.full(batch, -1, dtype=np.int64)  # -1: still running
-        first = np.full(batch, np.nan)
-        tol = self.atol + self.rtol * prob.scale
-        floor = self.stall_rtol * prob.scale
-        active = np.ones(batch, dtype=bool)
+        mixer = _Anderson(self.anderson, M) if self.anderson > 0 else None
+        active = np.arange(M)
         for _ in range(self.max_iter):
-            whole = bool(active.all())
-            mask = None if whole else active
+            whole = active.size == M
+            mask = None if whole else _batch_mask(active, batch)
             Xa = X if whole else X[active]
-            GX, aux_a = prob.G(Xa, mask)
+            Xin = Xa.reshape(*batch, *core) if whole else Xa  # what G (and Newton) expect
+            GXin, aux_a = prob.G(Xin, mask)
+            GX = GXin.reshape(active.size, *core)
+            aux_a = aux_a.reshape(active.size, *aux_a.shape[aux_a.ndim - len(core) :])
             r = alg.norm(GX - Xa)
             if aux is None:
-                aux = np.zeros((*batch, *aux_a.shape[len(r.shape) :]), dtype=aux_a.dtype)
-            sel = (...,) if whole else active
-            prev = np.array(resid[sel], copy=True)
-            r0 = np.where(np.isnan(first[sel]), r, first[sel])
-            first[sel] = r0
-            tol_a, floor_a = tol[sel], floor[sel]
-            iters[sel] += 1
-            resid[sel] = r
-            aux[sel] = aux_a
+                aux = np.zeros((M, *aux_a.shape[1:]), dtype=aux_a.dtype)
+            prev = resid[active]
+            r0 = np.where(np.isnan(first[active]), r, first[active])
+            first[active] = r0
+            tol_a, floor_a = tol[active], floor[active]
+            iters[active] += 1
+            resid[active] = r
+            aux[active] = aux_a
             done_ok = (r <= tol_a) | ((r >= prev) & (r <= floor_a))
             non_finite = ~np.isfinite(r)
             diverged = (r > self.divergence_factor * r0) & (r > tol_a) & ~non_finite
-            st = np.full(r.shape, -1, dtype=np.int64)
+            st = np.full(r.shape, CONTINUE, dtype=np.int64)
             st[done_ok] = STATUS_CONVERGED
             st[diverged] = STATUS_DIVERGED
             st[non_finite] = STATUS_NON_FINITE
-            status[sel] = st
-            going = st < 0
-            if np.any(going):
-                Xnew = self._update(prob, Xa, GX, mask)
-                if whole:
-                    X = np.where(_expand(going, alg), Xnew, X) if not going.all() else Xnew
-                else:
-                    Xa = np.where(_expand(going, alg), Xnew, Xa)
-                    X[active] = Xa
-            active = status < 0
-            if not active.any():
+            status[active] = st
+            going = st == CONTINUE
+            if not going.any():
+                active = active[going]
                 break
-        status[status < 0] = STATUS_MAX_ITER
+            sub = active[going]
+            Xg, Gg = Xa[going], GX[going]
+            if mixer is not None:
+                X[sub] = mixer.mix(sub, Xg, Gg)
+            else:
+                Xn = self._update(prob, Xin, GXin, mask).reshape(active.size, *core)
+                X[sub] = Xn[going]
+            active = sub
+        status[status == CONTINUE] = STATUS_MAX_ITER
         assert aux is not None
-        return NonlinearResult(x=X, aux=aux, iterations=iters, residual=resid, status=status)
+        return NonlinearResult(
+            x=X.reshape(*batch, *core),
+            aux=aux.reshape(*batch, *aux.shape[1:]),
+            iterations=iters.reshape(batch),
+            residual=resid.reshape(batch),
+            status=status.reshape(batch),
+        )
 
     def _solve_single(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
         """The same rules for one system, with Python scalars (no per-member bookkeeping)."""
@@ -245,16 +300,20 @@ class NonlinearSolver:
         it = 0
         r = math.inf
         aux: Array | None = None
+        mixer = _Anderson(self.anderson, 1) if self.anderson > 0 else None
         for it in range(1, self.max_iter + 1):
             GX, aux = prob.G(X, None)
             r = float(np.linalg.norm((GX - X).ravel()))
             code, prev, first = stopping_step(
                 r, prev, first, it, tol, floor, self.divergence_factor
             )
-            if code != STATUS_RUNNING:
+            if code != CONTINUE:
                 status = code
                 break
-            X = self._update(prob, X, GX, None)
+            if mixer is not None:
+                X = mixer.mix(np.zeros(1, dtype=np.int64), X[None], GX[None])[0]
+            else:
+                X = self._update(prob, X, GX, None)
         assert aux is not None
         return NonlinearResult(
             x=X,
@@ -265,8 +324,80 @@ class NonlinearSolver:
         )
 
 
-def _expand(mask: Array, alg: Algebra) -> Array:
-    return mask.reshape(mask.shape + (1,) * alg.core_ndim)
+def _batch_mask(active: Array, batch: tuple[int, ...]) -> Array:
+    """Boolean mask over the batch axes selecting the flat member indices ``active``."""
+    mask = np.zeros(int(np.prod(batch)), dtype=bool)
+    mask[active] = True
+    return mask.reshape(batch)
+
+
+class _Anderson:
+    """Anderson mixing (type II, memory ``m``) for the members of one nonlinear solve.
+
+    Every member starts at the first iteration, so all members still iterating share the
+    length of their history; the arrays hold every member (first axis) and are updated at the
+    rows of the members that go on.
+    """
+
+    def __init__(self, m: int, members: int) -> None:
+        self.m = m
+        self.members = members
+        self.dF: list[Array] = []  # oldest first
+        self.dG: list[Array] = []
+        self.f_prev: Array | None = None
+        self.g_prev: Array | None = None
+
+    def _inner(self, A: Array, B: Array) -> Array:
+        axes = tuple(range(1, A.ndim))
+        return np.real(np.sum(np.conj(A) * B, axis=axes))
+
+    def mix(self, rows: Array, X: Array, G: Array) -> Array:
+        """The next iterates of the members ``rows`` (their ``X`` and ``G(X)`` given)."""
+        f = G - X
+        if self.f_prev is None:
+            self.f_prev = np.zeros((self.members, *f.shape[1:]), dtype=f.dtype)
+            self.g_prev = np.zeros_like(self.f_prev)
+            self.f_prev[rows] = f
+            self.g_prev[rows] = G
+            return G
+        assert self.g_prev is not None
+        dF = np.zeros_like(self.f_prev)
+        dG = np.zeros_like(self.g_prev)
+        dF[rows] = f - self.f_prev[rows]
+        dG[rows] = G - self.g_prev[rows]
+        self.dF.append(dF)
+        self.dG.append(dG)
+        if len(self.dF) > self.m:
+            self.dF.pop(0)
+            self.dG.pop(0)
+        self.f_prev[rows] = f
+        self.g_prev[rows] = G
+        k = len(self.dF)
+        Fs = [d[rows] for d in self.dF]
+        A = np.empty((rows.size, k, k))
+        for i in range(k):
+            for j in range(i, k):
+                A[:, i, j] = A[:, j, i] = self._inner(Fs[i], Fs[j])
+        b = np.stack([self._inner(Fi, f) for Fi in Fs], axis=-1)
+        gamma = _regularized_solve(A, b)
+        out = G.copy()
+        for j in range(k):
+            g = gamma[:, j].reshape((rows.size,) + (1,) * (G.ndim - 1))
+            out -= g * self.dG[j][rows]
+        return out
+
+
+def _regularized_solve(A: Array, b: Array) -> Array:
+    """Solve ``(A + lambda I) x = b`` per member, ``lambda = 1e-12 max diag A`` (0 if A = 0)."""
+    k = A.shape[-1]
+    diag = np.max(np.diagonal(A, axis1=-2, axis2=-1), axis=-1)
+    lam = ANDERSON_REGULARIZATION * diag
+    ok = diag > 0
+    Ar = A + lam[:, None, None] * np.eye(k)
+    Ar[~ok] = np.eye(k)
+    x = np.linalg.solve(Ar, b[..., None])[..., 0]
+    x[~ok] = 0.0
+    return x
 
 
 @dataclass(frozen=True)
@@ -286,6 +417,10 @@ class FixedPoint(NonlinearSolver):
         A residual that stops decreasing below ``stall_rtol * ||W_k||`` is accepted.
     divergence_factor : float
         Growth of the residual over its first value that counts as divergence.
+    anderson : int
+        Anderson memory ``m`` (0: the plain iteration; see the module docstring). Mixing the
+        last ``m`` iterates costs ``O(m)`` inner products per iteration and usually saves
+        iterations when many are needed (large ``h ||B||``, tight tolerances).
     """
 
     rtol: float = 1e-14
@@ -293,11 +428,15 @@ class FixedPoint(NonlinearSolver):
     max_iter: int = 200
     stall_rtol: float = 1e-12
     divergence_factor: float = 1e4
+    anderson: int = 0
 
     def __post_init__(self) -> None:
         _StoppingRules(
             self.rtol, self.atol, self.max_iter, self.stall_rtol, self.divergence_factor
         ).check()
+        m = self.anderson
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or not 0 <= m <= 8:
+            raise ParameterError(f"anderson must be an integer memory in [0, 8], got {m!r}")
 
     def _update(self, prob: FixedPointProblem, X: Array, GX: Array, mask: Array | None) -> Array:
         return GX

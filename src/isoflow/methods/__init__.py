@@ -1,6 +1,5 @@
 """Time-stepping methods, one per module; each is a small frozen dataclass."""
 
-from ._base import AdvanceResult as AdvanceResult
 from ._base import Method as Method
 from ._base import StepResult as StepResult
 from .classical_midpoint import ClassicalMidpoint as ClassicalMidpoint
@@ -10,7 +9,6 @@ from .spherical_midpoint import SphericalMidpoint as SphericalMidpoint
 
 __all__ = [
     "RK4",
-    "AdvanceResult",
     "ClassicalMidpoint",
     "IsoMP",
     "Method",

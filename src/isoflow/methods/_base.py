@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from ..nonlinear import STATUS_CONVERGED, STATUS_NAMES
 from ..problems import IsospectralProblem
 
-__all__ = ["AdvanceResult", "Method", "StepResult"]
+__all__ = ["Method", "StepResult"]
 
 Array = NDArray[Any]
 
@@ -53,42 +53,18 @@ class StepResult:
         return STATUS_NAMES.get(code, str(code))
 
 
-@dataclass(frozen=True)
-class AdvanceResult:
-    """``n`` steps of a method taken in one call (see :meth:`Method.advance`).
-
-    Attributes
-    ----------
-    y : ndarray
-        State after the ``n_done`` accepted steps.
-    state : object
-        Method state after them.
-    n_done : int
-        Steps accepted; fewer than requested only if ``failure`` is set.
-    iterations_total, iterations_max : int
-        Nonlinear iterations summed over steps and members, and the largest per step/member.
-    residual_max : float
-        Largest final residual of the accepted steps.
-    failure : StepResult or None
-        The rejected step (non-converged solve or non-finite result), if any.
-    """
-
-    y: Array
-    state: Any
-    n_done: int
-    iterations_total: int = 0
-    iterations_max: int = 0
-    residual_max: float = 0.0
-    failure: StepResult | None = None
-
-
 class Method:
     """Base of the integrators: a small frozen dataclass with ``init`` and ``step``.
 
-    A method advances ``problem`` by one fixed step ``h`` with :meth:`step`; the solve loop owns
-    everything else (saving, diagnostics, failure policy). ``state`` is opaque to the loop, but
-    must be ``None`` or a tuple of floats and NumPy arrays, so that a run can be checkpointed and
-    resumed bit for bit (e.g. IsoMP's warm start ``(h, X_k - W_k)``).
+    A method advances ``problem`` by one fixed step ``h`` with :meth:`step`; the time loop owns
+    everything else (saving, diagnostics, failure policy, the ensemble members that failed).
+    ``state`` is opaque to the loop, but must be ``None`` or a flat tuple of floats, integers
+    and NumPy arrays, so that a run can be checkpointed and resumed bit for bit (e.g. IsoMP's
+    warm start ``(h, X_k - W_k, ...)``); an array with one entry per ensemble member has the
+    members on its leading axes, like the state, so that the loop can step a subset of them.
+
+    Methods never import the compiled layer (:mod:`isoflow._compiled`): the time loop asks it
+    for a compiled runner of the (method, problem) pair and otherwise calls :meth:`step`.
 
     Attributes
     ----------
@@ -110,26 +86,3 @@ class Method:
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
-
-    def advance(
-        self, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any = None
-    ) -> AdvanceResult:
-        """Take ``n`` steps of size ``h``; stop at the first step that fails.
-
-        The solve loop calls this between two saved states. The default loops over
-        :meth:`step`; compiled fast paths override it to run the whole loop in machine code.
-        A failed step is not accepted: ``y`` is then the last good state.
-        """
-        total = largest = 0
-        res_max = 0.0
-        for i in range(n):
-            res = self.step(problem, y, h, state)
-            if res.iterations is not None:
-                total += int(np.sum(res.iterations))
-                largest = max(largest, int(np.max(res.iterations)))
-            if not res.success or not np.all(np.isfinite(res.y)):
-                return AdvanceResult(y, state, i, total, largest, res_max, failure=res)
-            if res.residual is not None:
-                res_max = max(res_max, float(np.max(res.residual)))
-            y, state = res.y, res.state
-        return AdvanceResult(y, state, n, total, largest, res_max)

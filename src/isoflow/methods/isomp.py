@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
-from ._base import AdvanceResult, Method, StepResult
+from ._base import Method, StepResult
 
 __all__ = ["IsoMP", "extrapolation_weights"]
 
@@ -174,28 +174,6 @@ class IsoMP(Method):
             status=res.status,
             state=new_state,
         )
-
-    def advance(
-        self, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any = None
-    ) -> AdvanceResult:
-        r"""Take ``n`` steps; compiled when the problem carries a :class:`FastKernel`.
-
-        With the default :class:`~isoflow.FixedPoint` solver the whole loop runs in compiled
-        code for ``problem.kernel`` = ``ElementwiseLinear`` (with or without a frame) on
-        ``so(n)``, ``u(n)``, ``su(n)``, ``Sym(n)``, ``Herm(n)`` (small ``n``),
-        ``SpinNeighbourSum`` on :math:`(\mathbb{R}^3,\times)^N`, ``PairwiseVortex`` on
-        :math:`(\mathbb{R}^3,\times)^N` and :math:`(\mathbb{R}^3,\times_L)^N`; single large
-        matrices (``n >= 128``, any ``B``) use preallocated buffers, one full and one half
-        BLAS product per iteration. Everything else loops over :meth:`step`. The fast
-        paths follow the same stopping rules, extrapolation and failure semantics, so they
-        return the same :class:`AdvanceResult` (to rounding).
-        """
-        from .._fast import dispatch
-
-        fast = dispatch.isomp_advance(self, problem, y, h, n, state)
-        if fast is not None:
-            return fast
-        return super().advance(problem, y, h, n, state)
 
 
 def extrapolation_weights(m: int) -> tuple[float, ...]:

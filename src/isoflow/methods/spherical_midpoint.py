@@ -49,7 +49,7 @@ from .._errors import UnsupportedAlgebraError
 from ..algebras.spin import SpinVectors, dot
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
-from ._base import AdvanceResult, Method, StepResult
+from ._base import Method, StepResult
 
 __all__ = ["SphericalMidpoint"]
 
@@ -189,21 +189,3 @@ class SphericalMidpoint(Method):
             status=res.status,
             state=new_state,
         )
-
-    def advance(
-        self, problem: IsospectralProblem, y: Array, h: float, n: int, state: Any = None
-    ) -> AdvanceResult:
-        """Take ``n`` steps; compiled for ``problem.kernel`` = ``SpinNeighbourSum`` (spin chains)
-        or ``PairwiseVortex(geometry="sphere")`` (point vortices on the sphere).
-
-        With the default :class:`~isoflow.FixedPoint` solver the whole loop runs in compiled
-        code (same stopping rules, warm start and failure semantics as :meth:`step`, same
-        answer to rounding); otherwise the Python loop over :meth:`step`.
-        """
-        self._check(problem)
-        from .._fast import dispatch
-
-        fast = dispatch.smm_advance(self, problem, y, h, n, state)
-        if fast is not None:
-            return fast
-        return super().advance(problem, y, h, n, state)

@@ -1,7 +1,7 @@
-"""The stopping rules of :mod:`isoflow.nonlinear`, compiled for the kernels.
+"""The stopping rules of :mod:`isoflow.nonlinear`, compiled for the compiled loops.
 
-The kernels call :data:`stopping_step`, a numba compilation (inlined) of the very function
-the Python solvers use, so there is one statement of the rules.
+:data:`stopping_step` is a numba compilation (inlined) of the very function the Python
+solvers call, so the rules are stated once.
 """
 
 from __future__ import annotations
@@ -9,20 +9,22 @@ from __future__ import annotations
 import numba
 
 from ..nonlinear import (
+    ANDERSON_REGULARIZATION,
+    CONTINUE,
     STATUS_CONVERGED,
     STATUS_DIVERGED,
     STATUS_MAX_ITER,
     STATUS_NON_FINITE,
-    STATUS_RUNNING,
 )
 from ..nonlinear import stopping_step as _stopping_step
 
 __all__ = [
+    "ANDERSON_REGULARIZATION",
+    "CONTINUE",
     "STATUS_CONVERGED",
     "STATUS_DIVERGED",
     "STATUS_MAX_ITER",
     "STATUS_NON_FINITE",
-    "STATUS_RUNNING",
     "stopping_step",
 ]
 

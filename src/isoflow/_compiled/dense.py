@@ -1,0 +1,306 @@
+r"""Compiled IsoMP stages on dense matrices: so(n), u(n), su(n), Sym(n), Herm(n).
+
+These spaces are ``V = {Y : sigma(Y) = Y}`` with :math:`\sigma(Y) = s\,\bar Y^T` (``s = -1`` for
+the skew spaces, ``+1`` for the symmetric ones; ``su(n)`` adds ``Tr = 0``), and ``B`` takes
+values in the skew normalizer. One fixed-point iteration of IsoMP is, with ``B = f(X)``,
+
+.. math::
+
+    P = B X, \qquad [B, X] = P + \sigma(P), \qquad B X B = P B, \qquad
+    G(X) = \Pi\big(W + \tfrac h2 (P + \sigma(P)) + \tfrac{h^2}{4} P B\big),
+
+one evaluation of ``B`` and two matrix products (:meth:`isoflow.IsoMP.stage_problem`), and the
+new state is :math:`W_{k+1} = \Pi_V(W + h\,(P + \sigma(P)))` with ``P`` of the accepted ``X``.
+``Pi`` is the projection :math:`(Y + \sigma(Y))/2` onto the stage space (``u(n)`` for
+``su(n)``: the stage has a trace) and ``Pi_V`` the one onto ``V`` (for ``su(n)`` it also
+removes the trace).
+
+Two implementations of the same map, with the interface of :mod:`isoflow._compiled.driver`
+(``iterate(f, fargs, sp, W, X, G, aux, work, half, quarter) -> |G - X|^2`` and
+``finish(f, fargs, sp, W, X, aux, work, h, Wn) -> finite``):
+
+* **small** ``n`` (:func:`iterate_small`): written-out products, no library calls;
+* **larger** ``n`` (:func:`iterate_blas`): BLAS products (numba's ``np.dot``) into the
+  member's buffers. :math:`T = BXB` lies in ``V`` (``B`` is skew), so only its lower block
+  triangle is computed, block row by block row, as
+  :math:`T_{[r_0, r_1), [0, r_1)} = -P_{[r_0,r_1)}\, \overline{B}_{[0, r_1)}^{\,T}` (about
+  half of a full product for several blocks, :func:`lower_blocks`); the rest (bracket,
+  iterate, residual, mirrored into ``V``) is one cache-blocked pass over pairs of mirrored
+  tiles. Every iterate and state stays in ``V`` to the last bit.
+
+``sp`` (the stage parameters) is ``(n, s, traceless)`` for the small stage and
+``(n, s, traceless, rowoff, blocks)`` for the BLAS one: ``blocks`` the ``(nb, 2)`` row ranges
+of the triangular product and ``rowoff[i]`` the offset of row ``i`` of the packed
+lower-block-triangular ``T`` in the scratch row ``work[1]`` (:func:`packed_row_offsets`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+__all__ = [
+    "SMALL_N",
+    "finish",
+    "finish_blas",
+    "iterate_blas",
+    "iterate_small",
+    "lower_blocks",
+    "packed_row_offsets",
+]
+
+#: Largest ``n`` for which the written-out products beat BLAS calls (measured, benchmark 10).
+SMALL_N = 16
+#: Tile edge of the mirrored passes.
+_TILE = 32
+#: Target row-block height of the triangular product (a multiple of ``_TILE``).
+_BLOCK = 128
+#: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
+_FM = {"reassoc", "nsz", "contract"}
+
+
+def lower_blocks(n: int, block: int = _BLOCK) -> list[tuple[int, int]]:
+    """Row ranges ``(r0, r1)`` of the lower-block-triangular product, tile aligned.
+
+    At least two blocks once ``n >= 2 * _TILE`` (one block is a full product), at most eight.
+    """
+    nb = min(8, max(1, round(n / block)))
+    size = -(-n // nb)
+    size = -(-size // _TILE) * _TILE
+    return [(r0, min(n, r0 + size)) for r0 in range(0, n, size)]
+
+
+def packed_row_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(blocks, rowoff)``: the blocks as an ``(nb, 2)`` array and, for each row ``i`` of
+    block ``(r0, r1)``, the offset of its ``r1`` entries in the packed ``T``.
+
+    The packed size ``sum (r1 - r0) r1`` never exceeds ``n^2``.
+    """
+    blocks = lower_blocks(n)
+    rowoff = np.empty(n, dtype=np.int64)
+    off = 0
+    for r0, r1 in blocks:
+        for i in range(r0, r1):
+            rowoff[i] = off + (i - r0) * r1
+        off += (r1 - r0) * r1
+    return np.asarray(blocks, dtype=np.int64), rowoff
+
+
+# ---- small n: written-out products ------------------------------------------------------------
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def iterate_small(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """One iteration for small ``n``; ``aux`` receives ``[B, X] = P + sigma(P)``."""
+    n = sp[0]
+    s = sp[1]
+    Xm = X.reshape((n, n))
+    Wm = W.reshape((n, n))
+    Gm = G.reshape((n, n))
+    C = aux.reshape((n, n))
+    Bm = work[0].reshape((n, n))
+    P = work[1].reshape((n, n))
+    T = work[2].reshape((n, n))
+    f(Xm, Bm, *fargs)
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = 0.0
+        for k in range(n):
+            b = Bm[i, k]
+            for j in range(n):
+                P[i, j] += b * Xm[k, j]
+    for i in range(n):
+        for j in range(n):
+            T[i, j] = 0.0
+        for k in range(n):
+            p = P[i, k]
+            for j in range(n):
+                T[i, j] += p * Bm[k, j]
+    for i in range(n):
+        for j in range(n):
+            C[i, j] = P[i, j] + s * P[j, i].conjugate()
+    rr = 0.0
+    for i in range(n):
+        for j in range(i, n):
+            gij = Wm[i, j] + half * C[i, j] + quarter * T[i, j]
+            gji = Wm[j, i] + half * C[j, i] + quarter * T[j, i]
+            a = 0.5 * (gij + s * gji.conjugate())
+            b2 = 0.5 * (gji + s * gij.conjugate())
+            Gm[i, j] = a
+            Gm[j, i] = b2
+            d = a - Xm[i, j]
+            rr += d.real * d.real + d.imag * d.imag
+            if j != i:
+                d = b2 - Xm[j, i]
+                rr += d.real * d.real + d.imag * d.imag
+    return rr
+
+
+@numba.njit(cache=True)
+def _remove_trace(A, n):  # type: ignore[no-untyped-def]
+    """``A -= (Tr A / n) I`` for the flat ``n x n`` matrix ``A``."""
+    tr = A[0]
+    for i in range(1, n):
+        tr += A[i * (n + 1)]
+    tr = tr / n
+    for i in range(n):
+        A[i * (n + 1)] -= tr
+
+
+@numba.njit(cache=True)
+def finish(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
+    """``Wn = Pi_V(W + h C)`` with ``C = [B, X]`` in ``aux`` (the small stage); returns whether
+    ``Wn`` is finite. ``W`` and ``C`` are exact mirrors, hence so is ``Wn``."""
+    acc = 0.0
+    for i in range(W.shape[0]):
+        v = W[i] + h * aux[i]
+        Wn[i] = v
+        acc += abs(v.real) + abs(v.imag)
+    if sp[2]:
+        _remove_trace(Wn, sp[0])
+    return math.isfinite(acc)
+
+
+# ---- larger n: BLAS products and mirrored tile passes -------------------------------------------
+
+
+@numba.njit(cache=True, inline="always")
+def _load_t(A, bi, ie, bj, je, buf):  # type: ignore[no-untyped-def]
+    """``buf[ii, jj] = A[bj + jj, bi + ii]``: the transposed tile, read row by row from ``A``."""
+    for j in range(bj, je):
+        for i in range(bi, ie):
+            buf[i - bi, j - bj] = A[j, i]
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyped-def]
+    """``G = W + half (P + sigma(P)) - quarter T'`` on the lower triangle, mirrored into ``V``
+    (``T' = -T`` packed by rows, see :func:`iterate_blas`); returns ``|G - X|^2``.
+
+    Works on pairs of mirrored tiles ``(bi, bj)``, ``bj < bi``: the upper tile of ``P`` is read
+    row by row into a small transposed buffer, the mirrored tile of ``G`` is written back row
+    by row from a buffer; the inner loops run over contiguous row pieces (they vectorize).
+    Diagonal tiles are their own mirrors; on the diagonal ``T`` is projected onto ``V``.
+    """
+    n = W.shape[0]
+    PT = np.empty((_TILE, _TILE), dtype=P.dtype)
+    GT = np.empty((_TILE, _TILE), dtype=G.dtype)
+    rr = 0.0
+    for bi in range(0, n, _TILE):
+        ie = min(bi + _TILE, n)
+        for bj in range(0, bi, _TILE):
+            je = bj + _TILE
+            _load_t(P, bi, ie, bj, je, PT)
+            for ii in range(ie - bi):
+                i = bi + ii
+                p_row = P[i, bj:je]
+                w_row = W[i, bj:je]
+                t_row = Tp[rowoff[i] + bj : rowoff[i] + je]
+                x_row = X[i, bj:je]
+                g_row = G[i, bj:je]
+                pt_row = PT[ii]
+                gt_row = GT[ii]
+                for jj in range(_TILE):
+                    c = p_row[jj] + s * pt_row[jj].conjugate()
+                    g = w_row[jj] + half * c - quarter * t_row[jj]
+                    g_row[jj] = g
+                    gt_row[jj] = s * g.conjugate()
+                    d = g - x_row[jj]
+                    rr += 2.0 * (d.real * d.real + d.imag * d.imag)
+            for jj in range(_TILE):
+                dst = G[bj + jj, bi:ie]
+                for ii in range(ie - bi):
+                    dst[ii] = GT[ii, jj]
+        for i in range(bi, ie):  # the diagonal tile
+            o = rowoff[i]
+            for j in range(bi, i):
+                c = P[i, j] + s * P[j, i].conjugate()
+                g = W[i, j] + half * c - quarter * Tp[o + j]
+                G[i, j] = g
+                G[j, i] = s * g.conjugate()
+                d = g - X[i, j]
+                rr += 2.0 * (d.real * d.real + d.imag * d.imag)
+            p = P[i, i]
+            t = -Tp[o + i]
+            g = W[i, i] + half * (p + s * p.conjugate()) + quarter * (0.5 * (t + s * t.conjugate()))
+            G[i, i] = g
+            d = g - X[i, i]
+            rr += d.real * d.real + d.imag * d.imag
+    return rr
+
+
+@numba.njit(cache=True)
+def iterate_blas(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """One iteration for larger ``n``; ``aux`` receives ``P = B X`` (the bracket is formed
+    from it when needed)."""
+    n = sp[0]
+    s = sp[1]
+    rowoff = sp[3]
+    Xm = X.reshape((n, n))
+    Bm = work[0].reshape((n, n))
+    P = aux.reshape((n, n))
+    f(Xm, Bm, *fargs)
+    np.dot(Bm, Xm, P)
+    # B[:, :r1] = -conj(B[:r1, :]).T (B is skew), so block row (r0, r1) of T = P B is
+    # -P[r0:r1] @ conj(B[:r1]).T: both operands contiguous, the transpose is BLAS's flag
+    if np.iscomplexobj(Bm):
+        Bc = work[2].reshape((n, n))
+        for i in range(n):
+            for j in range(n):
+                Bc[i, j] = Bm[i, j].conjugate()
+    else:
+        Bc = Bm
+    Tp = work[1]
+    blocks = sp[4]
+    for b in range(blocks.shape[0]):
+        r0 = blocks[b, 0]
+        r1 = blocks[b, 1]
+        o = rowoff[r0]
+        np.dot(P[r0:r1], Bc[:r1].T, Tp[o : o + (r1 - r0) * r1].reshape((r1 - r0, r1)))
+    return _combine(W.reshape((n, n)), Xm, P, Tp, rowoff, G.reshape((n, n)), s, half, quarter)
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def finish_blas(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
+    """``Wn = Pi_V(W + h (P + sigma(P)))`` with ``P = B X`` in ``aux``, computed on the lower
+    triangle and mirrored tile by tile; returns whether ``Wn`` is finite."""
+    n = sp[0]
+    s = sp[1]
+    Wm = W.reshape((n, n))
+    P = aux.reshape((n, n))
+    Wo = Wn.reshape((n, n))
+    PT = np.empty((_TILE, _TILE), dtype=P.dtype)
+    VT = np.empty((_TILE, _TILE), dtype=P.dtype)
+    acc = 0.0
+    for bi in range(0, n, _TILE):
+        ie = min(bi + _TILE, n)
+        for bj in range(0, bi, _TILE):
+            je = bj + _TILE
+            _load_t(P, bi, ie, bj, je, PT)
+            for ii in range(ie - bi):
+                i = bi + ii
+                p_row = P[i, bj:je]
+                w_row = Wm[i, bj:je]
+                o_row = Wo[i, bj:je]
+                pt_row = PT[ii]
+                vt_row = VT[ii]
+                for jj in range(_TILE):
+                    v = w_row[jj] + h * (p_row[jj] + s * pt_row[jj].conjugate())
+                    o_row[jj] = v
+                    vt_row[jj] = s * v.conjugate()
+                    acc += abs(v.real) + abs(v.imag)
+            for jj in range(_TILE):
+                dst = Wo[bj + jj, bi:ie]
+                for ii in range(ie - bi):
+                    dst[ii] = VT[ii, jj]
+        for i in range(bi, ie):  # the diagonal tile
+            for j in range(bi, i + 1):
+                v = Wm[i, j] + h * (P[i, j] + s * P[j, i].conjugate())
+                Wo[i, j] = v
+                Wo[j, i] = s * v.conjugate()
+                acc += abs(v.real) + abs(v.imag)
+    if sp[2]:
+        _remove_trace(Wn, n)
+    return math.isfinite(acc)

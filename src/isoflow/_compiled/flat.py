@@ -1,0 +1,211 @@
+r"""The layout-free pieces of a compiled step, on one member's state as a flat vector.
+
+Every state layout (a dense matrix, an ``(N, 3)`` particle array, a spin chain in its
+``(3, N)`` layout) is one C-contiguous block of memory, so the parts of a step that act on
+whole states entry by entry are written once, here, on flat vectors:
+
+* the extrapolated initial guess :math:`X^{(0)} = W + \sum_q a_q D_q` from the ring of the last
+  stage offsets :math:`D = X - W` (:func:`guess`), and the ring itself (:func:`push`);
+* Anderson mixing of the fixed-point iterates (:func:`anderson`), the same algorithm as
+  :class:`isoflow.FixedPoint` (see :mod:`isoflow.nonlinear`);
+* sums of squares and real inner products (:func:`sumsq`, :func:`sumsq_diff`, :func:`rdot`).
+
+Element-wise loops are compiled *without* reassociation, so an entry and its mirror in a
+matrix space (``X[j, i] = s * conj(X[i, j])``) go through the same operations and stay exact
+mirrors; only the reductions reassociate (to vectorize).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["anderson", "copy", "guess", "push", "rdot", "sumsq", "sumsq_diff"]
+
+#: Reassociation for the reductions only (sums of squares, inner products).
+_REDUCE = {"reassoc", "nsz", "contract"}
+
+
+@numba.njit(cache=True, fastmath=_REDUCE)
+def sumsq(a):  # type: ignore[no-untyped-def]
+    """``sum |a_i|^2``."""
+    acc = 0.0
+    for i in range(a.shape[0]):
+        v = a[i]
+        acc += v.real * v.real + v.imag * v.imag
+    return acc
+
+
+@numba.njit(cache=True, fastmath=_REDUCE)
+def sumsq_diff(a, b):  # type: ignore[no-untyped-def]
+    """``sum |a_i - b_i|^2``."""
+    acc = 0.0
+    for i in range(a.shape[0]):
+        v = a[i] - b[i]
+        acc += v.real * v.real + v.imag * v.imag
+    return acc
+
+
+@numba.njit(cache=True, fastmath=_REDUCE)
+def rdot(a, b):  # type: ignore[no-untyped-def]
+    r"""The real inner product :math:`\operatorname{Re} \sum \bar a_i b_i`."""
+    acc = 0.0
+    for i in range(a.shape[0]):
+        x = a[i]
+        y = b[i]
+        acc += x.real * y.real + x.imag * y.imag
+    return acc
+
+
+@numba.njit(cache=True)
+def copy(dst, src):  # type: ignore[no-untyped-def]
+    """``dst[:] = src``."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@numba.njit(cache=True)
+def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
+    r"""``X = W + sum_q coefs[nh-1, q] ring[(head - q) % K]`` (newest offset first), or
+    ``X = W`` when ``nh = 0``; returns :math:`\|W\|^2`.
+
+    The sum is evaluated left to right from the newest offset, as the NumPy path does
+    (:meth:`isoflow.IsoMP.initial_stage`); up to four offsets are written out so the loop
+    vectorizes.
+    """
+    S = W.shape[0]
+    K = ring.shape[0]
+    if nh == 0:
+        for i in range(S):
+            X[i] = W[i]
+        return sumsq(W)
+    a0 = coefs[nh - 1, 0]
+    d0 = ring[head]
+    if nh == 1:
+        for i in range(S):
+            X[i] = W[i] + a0 * d0[i]
+        return sumsq(W)
+    a1 = coefs[nh - 1, 1]
+    d1 = ring[(head - 1) % K]
+    if nh == 2:
+        for i in range(S):
+            X[i] = W[i] + (a0 * d0[i] + a1 * d1[i])
+        return sumsq(W)
+    a2 = coefs[nh - 1, 2]
+    d2 = ring[(head - 2) % K]
+    if nh == 3:
+        for i in range(S):
+            X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i])
+        return sumsq(W)
+    a3 = coefs[nh - 1, 3]
+    d3 = ring[(head - 3) % K]
+    if nh == 4:
+        for i in range(S):
+            X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i])
+        return sumsq(W)
+    for i in range(S):
+        e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i]
+        for q in range(4, nh):
+            e = e + coefs[nh - 1, q] * ring[(head - q) % K, i]
+        X[i] = W[i] + e
+    return sumsq(W)
+
+
+@numba.njit(cache=True)
+def push(ring, slot, X, W):  # type: ignore[no-untyped-def]
+    """Store the stage offset ``X - W`` in ``ring[slot]``."""
+    d = ring[slot]
+    for i in range(W.shape[0]):
+        d[i] = X[i] - W[i]
+
+
+@numba.njit(cache=True)
+def _solve_small(A, b, k, x):  # type: ignore[no-untyped-def]
+    """``x[:k]`` solving ``A[:k, :k] x = b[:k]`` (Gaussian elimination, partial pivoting)."""
+    M = np.empty((k, k + 1))
+    for i in range(k):
+        for j in range(k):
+            M[i, j] = A[i, j]
+        M[i, k] = b[i]
+    for c in range(k):
+        p = c
+        for r in range(c + 1, k):
+            if abs(M[r, c]) > abs(M[p, c]):
+                p = r
+        if M[p, c] == 0.0:
+            for i in range(k):
+                x[i] = 0.0
+            return
+        if p != c:
+            for j in range(k + 1):
+                t = M[c, j]
+                M[c, j] = M[p, j]
+                M[p, j] = t
+        for r in range(c + 1, k):
+            fac = M[r, c] / M[c, c]
+            for j in range(c, k + 1):
+                M[r, j] -= fac * M[c, j]
+    for i in range(k - 1, -1, -1):
+        acc = M[i, k]
+        for j in range(i + 1, k):
+            acc -= M[i, j] * x[j]
+        x[i] = acc / M[i, i]
+
+
+@numba.njit(cache=True)
+def anderson(it, X, G, dF, dG, gram, fprev, gprev, fcur, gamma, reg):  # type: ignore[no-untyped-def]
+    r"""Anderson mixing (type II): the next iterate into ``X`` from ``X`` and ``G = G(X)``.
+
+    ``it`` is the 1-based iteration; ``dF``, ``dG`` (``(m, S)``) hold the differences of the
+    last ``min(m, it - 1)`` residuals and values of ``G``, oldest first (shifted when full),
+    ``gram`` their Gram matrix, ``fprev``/``gprev`` the previous residual and ``G``. Solves the
+    regularized normal equations ``(A + reg max(diag A) I) gamma = (<dF_j, f>)`` and sets
+    :math:`X = G - \sum_j \gamma_j \Delta G_j` (:class:`isoflow.FixedPoint` does the same).
+    """
+    m = dF.shape[0]
+    S = X.shape[0]
+    for i in range(S):
+        fcur[i] = G[i] - X[i]
+    if it == 1:
+        copy(fprev, fcur)
+        copy(gprev, G)
+        copy(X, G)
+        return
+    k = min(it - 1, m)
+    if it - 1 > m:  # drop the oldest pair: shift the history and its Gram matrix
+        for j in range(m - 1):
+            copy(dF[j], dF[j + 1])
+            copy(dG[j], dG[j + 1])
+            for i in range(m - 1):
+                gram[j, i] = gram[j + 1, i + 1]
+    new = k - 1
+    dfn = dF[new]
+    dgn = dG[new]
+    for i in range(S):
+        dfn[i] = fcur[i] - fprev[i]
+        dgn[i] = G[i] - gprev[i]
+    for j in range(k):
+        v = rdot(dF[j], dfn)
+        gram[j, new] = v
+        gram[new, j] = v
+    copy(fprev, fcur)
+    copy(gprev, G)
+    big = 0.0
+    for j in range(k):
+        big = max(big, gram[j, j])
+    if big <= 0.0:
+        copy(X, G)
+        return
+    A = np.empty((k, k))
+    b = np.empty(k)
+    for j in range(k):
+        b[j] = rdot(dF[j], fcur)
+        for i in range(k):
+            A[j, i] = gram[j, i]
+        A[j, j] += reg * big
+    _solve_small(A, b, k, gamma)
+    for i in range(S):
+        acc = G[i]
+        for j in range(k):
+            acc = acc - gamma[j] * dG[j, i]
+        X[i] = acc

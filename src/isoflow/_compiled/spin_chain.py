@@ -1,0 +1,224 @@
+r"""Fused stages for spin chains: :class:`~isoflow.SpinNeighbourSum` in a ``(3, N)`` layout.
+
+``B_i(x) = c\,(x_{i-1} + x_{i+1})`` (periodic; the Heisenberg chain is ``c = -1``). The generic
+particle stage (:mod:`isoflow._compiled.particles`) evaluates ``B`` into a buffer and then the
+stage map, which moves about twice the memory of one fused sweep; for long chains the step is
+memory bound, so this kernel keeps a specialized evaluation (benchmark 4): the state is held
+in the structure-of-arrays layout ``(3, N)`` (unit stride, vectorizable) and each iteration is
+one sweep that forms ``B_i`` from the neighbours on the fly:
+
+.. math::
+
+    G_i = w_i + \tfrac h2\, b_i \times x_i - \tfrac{h^2}{4} (b_i\cdot x_i)\, b_i
+    \quad\text{(IsoMP)}, \qquad
+    G_i = w_i + \tfrac h2\, B_i(m) \times m_i \quad\text{(spherical midpoint)},
+
+72 bytes per spin per IsoMP iteration (read ``x`` and ``w``, write ``G``). The same formulas
+and order of operations as :mod:`isoflow._compiled.particles`, so both give the same iterates.
+Chains with many spins are cut into chunks over numba threads (the ``*_par`` stages).
+
+``sp = (N, c, nch)``: the number of spins, the coupling and the number of chunks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+__all__ = [
+    "finish_iso",
+    "finish_smm",
+    "iterate_iso_par",
+    "iterate_iso_ser",
+    "iterate_smm_par",
+    "iterate_smm_ser",
+]
+
+#: Reassociation (and no signed zeros) only: vectorizes the residual reductions.
+_FM = {"reassoc", "nsz"}
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _iso_one(X, W, G, i, im, ip, c, half, quarter):  # type: ignore[no-untyped-def]
+    x0, x1, x2 = X[0, i], X[1, i], X[2, i]
+    b0 = c * (X[0, im] + X[0, ip])
+    b1 = c * (X[1, im] + X[1, ip])
+    b2 = c * (X[2, im] + X[2, ip])
+    d = -(b0 * x0 + b1 * x1 + b2 * x2)
+    g0 = W[0, i] + half * (b1 * x2 - b2 * x1) + quarter * (d * b0)
+    g1 = W[1, i] + half * (b2 * x0 - b0 * x2) + quarter * (d * b1)
+    g2 = W[2, i] + half * (b0 * x1 - b1 * x0) + quarter * (d * b2)
+    G[0, i] = g0
+    G[1, i] = g1
+    G[2, i] = g2
+    return (g0 - x0) ** 2 + (g1 - x1) ** 2 + (g2 - x2) ** 2
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _smm_one(m, X, W, G, i, im, ip, c, half):  # type: ignore[no-untyped-def]
+    x0, x1, x2 = m[0, i], m[1, i], m[2, i]
+    b0 = c * (m[0, im] + m[0, ip])
+    b1 = c * (m[1, im] + m[1, ip])
+    b2 = c * (m[2, im] + m[2, ip])
+    g0 = W[0, i] + half * (b1 * x2 - b2 * x1)
+    g1 = W[1, i] + half * (b2 * x0 - b0 * x2)
+    g2 = W[2, i] + half * (b0 * x1 - b1 * x0)
+    G[0, i] = g0
+    G[1, i] = g1
+    G[2, i] = g2
+    return (g0 - X[0, i]) ** 2 + (g1 - X[1, i]) ** 2 + (g2 - X[2, i]) ** 2
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _point_one(M, W, m, i):  # type: ignore[no-untyped-def]
+    w0, w1, w2 = W[0, i], W[1, i], W[2, i]
+    a0, a1, a2 = M[0, i], M[1, i], M[2, i]
+    nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    v0, v1, v2 = 2.0 * a0 - w0, 2.0 * a1 - w1, 2.0 * a2 - w2
+    nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    nm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    f = math.sqrt(nw * nv) / nm if nm > 0 else 0.0
+    m[0, i] = f * a0
+    m[1, i] = f * a1
+    m[2, i] = f * a2
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _iso_range(X, W, G, c, half, quarter, lo, hi):  # type: ignore[no-untyped-def]
+    """IsoMP sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``)."""
+    acc = 0.0
+    for i in range(lo, hi):
+        acc += _iso_one(X, W, G, i, i - 1, i + 1, c, half, quarter)
+    return acc
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _point_range(X, W, m, lo, hi):  # type: ignore[no-untyped-def]
+    for i in range(lo, hi):
+        _point_one(X, W, m, i)
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _smm_range(m, X, W, G, c, half, lo, hi):  # type: ignore[no-untyped-def]
+    acc = 0.0
+    for i in range(lo, hi):
+        acc += _smm_one(m, X, W, G, i, i - 1, i + 1, c, half)
+    return acc
+
+
+def _views(sp, W, X, G):  # type: ignore[no-untyped-def]
+    N = sp[0]
+    return N, W.reshape((3, N)), X.reshape((3, N)), G.reshape((3, N))
+
+
+_views = numba.njit(cache=True, inline="always")(_views)
+
+
+@numba.njit(cache=True)
+def iterate_iso_ser(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """One IsoMP sweep over the chain (``f`` is not called: ``B`` is formed on the fly)."""
+    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    c = sp[1]
+    rr = _iso_one(Xm, Wm, Gm, 0, N - 1, 1 % N, c, half, quarter)
+    if N > 1:
+        rr += _iso_range(Xm, Wm, Gm, c, half, quarter, 1, N - 1)
+        rr += _iso_one(Xm, Wm, Gm, N - 1, N - 2, 0, c, half, quarter)
+    return rr
+
+
+@numba.njit(cache=True, parallel=True)
+def iterate_iso_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """:func:`iterate_iso_ser` with the chain cut into ``sp[2]`` chunks over numba threads."""
+    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    c = sp[1]
+    nch = sp[2]
+    size = (N + nch - 1) // nch
+    part = np.zeros(nch)
+    for ch in numba.prange(nch):
+        lo = max(ch * size, 1)
+        hi = min((ch + 1) * size, N - 1)
+        if lo < hi:
+            part[ch] = _iso_range(Xm, Wm, Gm, c, half, quarter, lo, hi)
+    rr = part.sum()
+    rr += _iso_one(Xm, Wm, Gm, 0, N - 1, 1, c, half, quarter)
+    rr += _iso_one(Xm, Wm, Gm, N - 1, N - 2, 0, c, half, quarter)
+    return rr
+
+
+@numba.njit(cache=True)
+def iterate_smm_ser(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """One spherical-midpoint iteration: the points ``m`` (into ``work[0]``), then the sweep."""
+    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    c = sp[1]
+    m = work[0].reshape((3, N))
+    _point_range(Xm, Wm, m, 0, N)
+    rr = _smm_one(m, Xm, Wm, Gm, 0, N - 1, 1 % N, c, half)
+    if N > 1:
+        rr += _smm_range(m, Xm, Wm, Gm, c, half, 1, N - 1)
+        rr += _smm_one(m, Xm, Wm, Gm, N - 1, N - 2, 0, c, half)
+    return rr
+
+
+@numba.njit(cache=True, parallel=True)
+def iterate_smm_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """:func:`iterate_smm_ser` over ``sp[2]`` chunks on numba threads."""
+    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    c = sp[1]
+    nch = sp[2]
+    m = work[0].reshape((3, N))
+    size = (N + nch - 1) // nch
+    part = np.zeros(nch)
+    for ch in numba.prange(nch):
+        lo = ch * size
+        hi = min((ch + 1) * size, N)
+        if lo < hi:
+            _point_range(Xm, Wm, m, lo, hi)
+    for ch in numba.prange(nch):
+        lo = max(ch * size, 1)
+        hi = min((ch + 1) * size, N - 1)
+        if lo < hi:
+            part[ch] = _smm_range(m, Xm, Wm, Gm, c, half, lo, hi)
+    rr = part.sum()
+    rr += _smm_one(m, Xm, Wm, Gm, 0, N - 1, 1, c, half)
+    rr += _smm_one(m, Xm, Wm, Gm, N - 1, N - 2, 0, c, half)
+    return rr
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _final(Y, W, Wn, c, h):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(Y) x Y``; returns a sum that is finite iff every entry is."""
+    N = Y.shape[1]
+    acc = 0.0
+    for i in range(N):
+        im = i - 1 if i > 0 else N - 1
+        ip = i + 1 if i < N - 1 else 0
+        y0, y1, y2 = Y[0, i], Y[1, i], Y[2, i]
+        b0 = c * (Y[0, im] + Y[0, ip])
+        b1 = c * (Y[1, im] + Y[1, ip])
+        b2 = c * (Y[2, im] + Y[2, ip])
+        v0 = W[0, i] + h * (b1 * y2 - b2 * y1)
+        v1 = W[1, i] + h * (b2 * y0 - b0 * y2)
+        v2 = W[2, i] + h * (b0 * y1 - b1 * y0)
+        Wn[0, i] = v0
+        Wn[1, i] = v1
+        Wn[2, i] = v2
+        acc += abs(v0) + abs(v1) + abs(v2)
+    return acc
+
+
+@numba.njit(cache=True)
+def finish_iso(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(X) x X`` from the accepted ``X`` (the bracket of its last evaluation)."""
+    N = sp[0]
+    acc = _final(X.reshape((3, N)), W.reshape((3, N)), Wn.reshape((3, N)), sp[1], h)
+    return math.isfinite(acc)
+
+
+@numba.njit(cache=True)
+def finish_smm(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(m) x m`` with the points ``m`` of the last iteration (``work[0]``)."""
+    N = sp[0]
+    acc = _final(work[0].reshape((3, N)), W.reshape((3, N)), Wn.reshape((3, N)), sp[1], h)
+    return math.isfinite(acc)

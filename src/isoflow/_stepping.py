@@ -1,0 +1,319 @@
+r"""Advancing a run by chunks of steps: the seam between the time loop and the step code.
+
+The time loop (:mod:`isoflow._solve`) drives a :class:`Runner`: it asks it to take ``n``
+steps, saving every ``save_every``-th state into rows it hands over, and reads back the
+current state, the method state (for checkpoints) and a per-member record of failures. Two
+runners exist:
+
+* :class:`PythonRunner` (here) calls the method's own :meth:`~isoflow.methods.Method.step`
+  on the NumPy arrays: every method, solver and problem;
+* the compiled runner of :mod:`isoflow._compiled`, which the time loop asks for first; it
+  exists for the combinations that have a compiled driver (a problem with a kernel, the
+  fixed-point solver) and runs whole chunks in machine code.
+
+Ensemble members are independent. A member whose step fails (the nonlinear solve does not
+converge, the new state is not finite, ``B`` raises) is *frozen* at its last good state and
+recorded in :class:`MemberFailures`; the others go on. Saved rows of a frozen member repeat
+its last good state.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .methods import Method
+from .nonlinear import STATUS_CONVERGED, STATUS_NAMES, STATUS_NON_FINITE
+from .problems import IsospectralProblem
+
+__all__ = [
+    "FAILURE_NAMES",
+    "FAIL_B_RAISED",
+    "MemberFailures",
+    "PythonRunner",
+    "Runner",
+    "merge_members",
+    "take_members",
+]
+
+Array = NDArray[Any]
+
+#: Failure code of a member whose ``B`` raised an exception (beside the solver's codes).
+FAIL_B_RAISED = 4
+#: Names of the failure codes of a member (the nonlinear solver's and :data:`FAIL_B_RAISED`).
+FAILURE_NAMES = {**STATUS_NAMES, FAIL_B_RAISED: "B raised"}
+
+
+@dataclass
+class MemberFailures:
+    """Which ensemble members failed, when and why (flattened member index).
+
+    Attributes
+    ----------
+    step : ndarray of int, shape (M,)
+        Index of the step that failed (``0``: the step from ``t0``; the member's last good
+        state is after ``step`` steps); ``-1`` while alive.
+    status : ndarray of int
+        Failure code (``FAILURE_NAMES``); 0 while alive.
+    iterations : ndarray of int
+        Iterations spent on the failed step.
+    residual : ndarray of float
+        Final residual of the failed solve.
+    messages : dict of int to str
+        A message per member where there is more to say (the exception ``B`` raised).
+    """
+
+    step: NDArray[np.int64]
+    status: NDArray[np.int64]
+    iterations: NDArray[np.int64]
+    residual: NDArray[np.float64]
+    messages: dict[int, str] = field(default_factory=dict)
+
+    @classmethod
+    def none(cls, members: int) -> MemberFailures:
+        """A record of ``members`` members, all alive."""
+        return cls(
+            step=np.full(members, -1, dtype=np.int64),
+            status=np.zeros(members, dtype=np.int64),
+            iterations=np.zeros(members, dtype=np.int64),
+            residual=np.zeros(members),
+        )
+
+    @property
+    def alive(self) -> NDArray[np.bool_]:
+        """Per member: not failed."""
+        return self.step < 0
+
+    @property
+    def failed(self) -> NDArray[np.int64]:
+        """Flat indices of the failed members."""
+        return np.flatnonzero(self.step >= 0)
+
+    def record(self, m: int, step: int, status: int, iterations: int, residual: float) -> None:
+        """Mark member ``m`` failed at ``step``."""
+        self.step[m] = step
+        self.status[m] = status
+        self.iterations[m] = iterations
+        self.residual[m] = residual
+
+    def reason(self, m: int) -> str:
+        """The failure of member ``m`` in words."""
+        name = FAILURE_NAMES.get(int(self.status[m]), str(int(self.status[m])))
+        extra = self.messages.get(int(m))
+        return f"{name}: {extra}" if extra else name
+
+
+class Runner:
+    """Advances ``M`` ensemble members (flattened) by chunks of steps; see the module docstring.
+
+    Attributes
+    ----------
+    k : int
+        Steps completed since ``t0``. Failed members are frozen while the others go on; once
+        every member has failed, the run ends where the last one failed.
+    last_exception : BaseException or None
+        The exception ``B`` raised, when a member failed with :data:`FAIL_B_RAISED`.
+    failures : MemberFailures
+    iterations_total, iterations_max : int
+        Nonlinear iterations summed over steps and members; the largest for one step.
+    residual_max : float
+        Largest final residual of an accepted solve.
+    b_evaluations : int
+        Evaluations of ``B`` summed over members (Newton's Jacobians, RK stages included).
+    label : str
+        What runs the steps, for messages (``"NumPy"``, ``"compiled (dense BLAS)"``, ...).
+    """
+
+    k: int
+    failures: MemberFailures
+    label: str = "runner"
+
+    def __init__(self) -> None:
+        self.last_exception: BaseException | None = None
+        self.iterations_total = 0
+        self.iterations_max = 0
+        self.residual_max = 0.0
+        self.b_evaluations = 0
+
+    def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+        """Take ``nsteps`` steps; the state after every step ``k`` with ``k % save_every == 0``
+        or ``k == k_final`` goes into the next row of ``out`` (``(R, M, *core)``)."""
+        raise NotImplementedError  # pragma: no cover
+
+    def state(self) -> tuple[Array, Any]:
+        """The current state ``(*batch, *core)`` and the method state (members flattened:
+        per-member arrays ``(M, ...)``, or the member's own shape for one system)."""
+        raise NotImplementedError  # pragma: no cover
+
+
+def take_members(state: Any, idx: NDArray[np.intp], members: int) -> Any:
+    """The method state of the members ``idx`` (arrays whose first axis has ``members``
+    entries are indexed; floats and other entries are shared)."""
+    if state is None:
+        return None
+    return tuple(
+        x[idx] if isinstance(x, np.ndarray) and x.ndim and x.shape[0] == members else x
+        for x in state
+    )
+
+
+def merge_members(full: Any, idx: NDArray[np.intp], sub: Any, members: int) -> Any:
+    """``full`` with the entries of the members ``idx`` replaced by ``sub`` (see
+    :func:`take_members`); arrays missing from ``full`` start at zero for the others."""
+    if sub is None:
+        return None
+    out = []
+    for q, x in enumerate(sub):
+        if isinstance(x, np.ndarray) and x.ndim and x.shape[0] == len(idx):
+            old = full[q] if full is not None and q < len(full) else None
+            if not (isinstance(old, np.ndarray) and old.shape[1:] == x.shape[1:]):
+                old = np.zeros((members, *x.shape[1:]), dtype=x.dtype)
+            else:
+                old = old.copy()
+            old[idx] = x
+            out.append(old)
+        else:
+            out.append(x)
+    return tuple(out)
+
+
+class _CountingB:
+    """``B`` that counts the members it is evaluated on."""
+
+    def __init__(self, B: Any, core_ndim: int) -> None:
+        self.B = B
+        self.core_ndim = core_ndim
+        self.count = 0
+
+    def __call__(self, W: Array) -> Array:
+        self.count += int(np.prod(np.shape(W)[: np.ndim(W) - self.core_ndim], dtype=np.int64))
+        return self.B(W)
+
+
+class PythonRunner(Runner):
+    """Steps with the method's own :meth:`~isoflow.methods.Method.step` (NumPy).
+
+    Parameters
+    ----------
+    problem, method, h :
+        The run.
+    y : ndarray, shape (*batch, *core)
+        The state after ``k`` steps (in the space).
+    method_state : object
+        The method state after ``k`` steps (``None`` at the start).
+    k : int
+        Steps already taken.
+    failures : MemberFailures or None
+        The record to continue (a resumed run), else all members alive.
+    """
+
+    label = "NumPy"
+
+    def __init__(
+        self, problem: IsospectralProblem, method: Method, y: Array, h: float, *,
+        method_state: Any = None, k: int = 0, failures: MemberFailures | None = None,
+    ) -> None:  # fmt: skip
+        super().__init__()
+        alg = problem.algebra
+        self.core = alg.shape
+        self.batch = alg.batch_shape(y)
+        self.single = self.batch == ()
+        self.M = int(np.prod(self.batch, dtype=np.int64))
+        self.counter = _CountingB(problem.B, alg.core_ndim)
+        self.problem = dataclasses.replace(problem, B=self.counter)
+        self.method = method
+        self.h = float(h)
+        self.Y = np.array(y, dtype=alg.dtype, copy=True).reshape(self.M, *self.core)
+        self.mstate = method_state
+        self.k = int(k)
+        self.failures = failures if failures is not None else MemberFailures.none(self.M)
+
+    @property
+    def b_evaluations(self) -> int:  # type: ignore[override]
+        return self.counter.count
+
+    @b_evaluations.setter
+    def b_evaluations(self, value: int) -> None:
+        pass  # counted by the wrapped B
+
+    def state(self) -> tuple[Array, Any]:
+        return self.Y.reshape(*self.batch, *self.core), self.mstate
+
+    def _step_all(self, y: Array, st: Any) -> tuple[Any, BaseException | None]:
+        try:
+            return self.method.step(self.problem, y, self.h, st), None
+        except Exception as exc:  # B (or the user's code under it) raised
+            return None, exc
+
+    def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+        row = 0
+        fails = self.failures
+        for _ in range(nsteps):
+            k = self.k + 1
+            self._one_step(k - 1, np.flatnonzero(fails.alive))
+            if not fails.alive.any():
+                return  # every member frozen: the run ends after k - 1 steps
+            self.k = k
+            if k % save_every == 0 or k == k_final:
+                out[row] = self.Y
+                row += 1
+
+    def _one_step(self, k: int, alive: NDArray[np.intp]) -> None:
+        """Step ``k`` (from ``t0 + k h``) of the members ``alive``."""
+        everyone = alive.size == self.M
+        if self.single:
+            y, st = self.Y[0], self.mstate
+        elif everyone:
+            y, st = self.Y, self.mstate
+        else:
+            y, st = self.Y[alive], take_members(self.mstate, alive, self.M)
+        res, exc = self._step_all(y, st)
+        if exc is not None:
+            msg = f"{type(exc).__name__}: {exc}"
+            for m in alive:
+                self.failures.record(int(m), k, FAIL_B_RAISED, 0, float("nan"))
+                self.failures.messages[int(m)] = msg
+            self.last_exception = exc
+            return
+        n = alive.size
+        if res.status is None:
+            status = np.full(n, STATUS_CONVERGED, dtype=np.int64)
+            iters = np.zeros(n, dtype=np.int64)
+            resid = np.zeros(n)
+        else:
+            status = np.asarray(res.status, dtype=np.int64).reshape(n).copy()
+            iters = np.asarray(res.iterations, dtype=np.int64).reshape(n)
+            resid = np.asarray(res.residual, dtype=float).reshape(n)
+        ynew = np.asarray(res.y).reshape(n, *self.core)
+        finite = np.all(np.isfinite(ynew.reshape(n, -1)), axis=1)
+        status[(status == STATUS_CONVERGED) & ~finite] = STATUS_NON_FINITE
+        ok = status == STATUS_CONVERGED
+        self.iterations_total += int(iters.sum())
+        self.iterations_max = max(self.iterations_max, int(iters.max()) if n else 0)
+        if ok.any():
+            self.residual_max = max(self.residual_max, float(resid[ok].max()))
+        for j in np.flatnonzero(~ok):
+            self.failures.record(int(alive[j]), k, int(status[j]), int(iters[j]), float(resid[j]))
+        if ok.all():
+            if self.single:
+                self.Y[0] = ynew[0]
+            elif everyone:
+                self.Y = ynew.copy() if ynew.base is not None else ynew
+            else:
+                self.Y[alive] = ynew
+            self.mstate = (
+                res.state
+                if self.single or everyone
+                else merge_members(self.mstate, alive, res.state, self.M)
+            )
+            return
+        if self.single:
+            return  # the one member failed: frozen
+        good = alive[ok]
+        self.Y[good] = ynew[ok]
+        sub = take_members(res.state, np.flatnonzero(ok), n)
+        self.mstate = merge_members(self.mstate, good, sub, self.M)

@@ -1,0 +1,389 @@
+"""The compiled loops equal the NumPy path: same states (1e-13), iterations, failures.
+
+Every layout of :mod:`isoflow._compiled` (dense with written-out products, dense with BLAS,
+blocked ensembles, particles, fused spin chains) and every kernel (the built-in ones and a
+user's ``CompiledB``) is run by the compiled runner and by the method's own NumPy steps, and
+the two runs are compared. No timing assertions here (speed: ``benchmarks/``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+import user_kernels as uk
+from helpers import assert_same_run, compiled_and_numpy, run_with
+from isoflow._compiled import compiled_runner
+
+Case = Callable[[], tuple]
+
+
+def _rigid(n: int = 10, members: int = 0, scale: float = 1.0):
+    prob, W0 = iso.models.rigid_body(n)
+    if members:
+        W0 = np.stack([W0 * scale * (1.0 + 0.05 * i) for i in range(members)])
+    return prob, W0
+
+
+def _elementwise(alg: iso.algebras.Algebra, seed: int = 0):
+    """``B = C * W`` on any of the five dense spaces (C symmetric on the skew spaces,
+    antisymmetric on the symmetric ones)."""
+    rng = np.random.default_rng(seed)
+    n = alg.shape[0]
+    A = rng.uniform(-1.0, 1.0, (n, n))
+    sym_space = isinstance(alg, (iso.algebras.Symmetric, iso.algebras.Hermitian))
+    C = 0.5 * (A - A.T) if sym_space else 0.5 * (A + A.T)
+    kernel = iso.ElementwiseLinear(C)
+    prob = iso.IsospectralProblem(B=kernel.evaluate, algebra=alg, kernel=kernel)
+    W0 = alg.random(seed + 1)
+    return prob, W0 / float(alg.norm(W0))
+
+
+def _brockett(n: int, members: int = 0):
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n))
+    N = 0.5 * (A + A.conj().T) / n
+    prob, W0 = iso.models.brockett(n=n, N=N, seed=1)
+    if members:
+        W0 = np.stack([W0 * (1.0 + 0.1 * i) for i in range(members)])
+    return prob, W0
+
+
+def _user_dense(alg: iso.algebras.Algebra, members: int = 0, seed: int = 0):
+    prob = uk.cubic_problem(alg, seed=seed, scale=0.5)
+    W0 = alg.random(seed + 7)
+    W0 = W0 / float(alg.norm(W0))
+    if members:
+        W0 = np.stack([W0 * (1.0 + 0.1 * i) for i in range(members)])
+    return prob, W0
+
+
+def _user_particles(kind: str, N: int = 6, members: int = 0):
+    rng = np.random.default_rng(11)
+    axis = rng.standard_normal(3)
+    axis /= np.linalg.norm(axis)
+    alg = iso.algebras.so3_vectors(N) if kind == "so3" else iso.algebras.sl2_vectors(N)
+    prob = iso.IsospectralProblem(
+        B=uk.precession_numpy(axis, 0.7),
+        algebra=alg,
+        kernel=iso.CompiledB(uk.precession, (axis, 0.7)),
+    )
+    w0 = rng.standard_normal((*((members,) if members else ()), N, 3))
+    return prob, w0
+
+
+def _chain(N: int = 30, members: int = 0):
+    prob, w0 = iso.models.heisenberg_chain(N=N, initial="random", seed=2)
+    if members:
+        w0 = np.stack([np.roll(w0, i, axis=0) for i in range(members)])
+    return prob, w0
+
+
+def _user_chain(N: int = 30):
+    prob, w0 = iso.models.heisenberg_chain(N=N, initial="random", seed=2)
+    return dataclasses.replace(prob, kernel=iso.CompiledB(uk.neighbours, (-1.0,))), w0
+
+
+def _sphere_vortices(N: int = 5, members: int = 0):
+    rng = np.random.default_rng(N)
+    pos = rng.standard_normal((N, 3))
+    pos /= np.linalg.norm(pos, axis=1, keepdims=True)
+    prob, x0 = iso.models.sphere_vortices(positions=pos, circulations=rng.uniform(0.5, 1.5, N))
+    if members:
+        x0 = np.stack([x0] * members)
+    return prob, x0
+
+
+IsoMP, SMM = iso.IsoMP, iso.SphericalMidpoint
+A3 = iso.FixedPoint(anderson=3)
+
+# name -> (problem factory, method, h, steps, save_every)
+CASES: dict[str, tuple[Callable[[], tuple], iso.Method, float, int, int]] = {
+    "rigid so(10)": (_rigid, IsoMP(), 0.1, 40, 1),
+    "rigid so(10), X0 = W": (_rigid, IsoMP(initial_guess="state"), 0.1, 40, 3),
+    "rigid so(10), order-1 guess": (_rigid, IsoMP(extrapolation_order=1), 0.1, 30, 1),
+    "rigid so(10), Anderson": (_rigid, IsoMP(solver=A3), 0.3, 40, 4),
+    "rigid ensemble 5 (members)": (lambda: _rigid(members=5), IsoMP(), 0.1, 25, 5),
+    "rigid ensemble 20 (blocks)": (lambda: _rigid(members=20), IsoMP(), 0.1, 25, 5),
+    "rigid ensemble 20, Anderson": (lambda: _rigid(members=20), IsoMP(solver=A3), 0.1, 25, 5),
+    "u(6)": (lambda: _elementwise(iso.algebras.u(6)), IsoMP(), 0.2, 30, 2),
+    "su(6)": (lambda: _elementwise(iso.algebras.su(6)), IsoMP(), 0.2, 30, 2),
+    "herm(5)": (lambda: _elementwise(iso.algebras.herm(5)), IsoMP(), 0.2, 30, 2),
+    "sym(5)": (lambda: _elementwise(iso.algebras.sym(5)), IsoMP(), 0.2, 30, 2),
+    "su(5) ensemble 12 (blocks)": (
+        lambda: (lambda p, w: (p, np.stack([w * (1 + 0.1 * i) for i in range(12)])))(
+            *_elementwise(iso.algebras.su(5))
+        ),
+        IsoMP(),
+        0.2,
+        20,
+        4,
+    ),
+    "brockett herm(6) in a frame": (lambda: _brockett(6), IsoMP(), 0.1, 30, 3),
+    "brockett herm(6) in a frame, ensemble 10": (lambda: _brockett(6, 10), IsoMP(), 0.1, 20, 4),
+    "so(40) BLAS": (lambda: _elementwise(iso.algebras.so(40)), IsoMP(), 0.1, 12, 3),
+    "u(40) BLAS": (lambda: _elementwise(iso.algebras.u(40)), IsoMP(), 0.1, 12, 3),
+    "su(40) BLAS": (lambda: _elementwise(iso.algebras.su(40)), IsoMP(), 0.1, 12, 3),
+    "herm(33) BLAS": (lambda: _elementwise(iso.algebras.herm(33)), IsoMP(), 0.1, 10, 2),
+    "so(130) BLAS, triangular blocks": (
+        lambda: _elementwise(iso.algebras.so(130)),
+        IsoMP(),
+        0.1,
+        4,
+        1,
+    ),
+    "so(40) BLAS ensemble 3": (
+        lambda: (lambda p, w: (p, np.stack([w, 0.5 * w, 1.5 * w])))(
+            *_elementwise(iso.algebras.so(40))
+        ),
+        IsoMP(),
+        0.1,
+        8,
+        2,
+    ),
+    "CompiledB so(8)": (lambda: _user_dense(iso.algebras.so(8)), IsoMP(), 0.2, 30, 3),
+    "CompiledB u(7) ensemble 4": (
+        lambda: _user_dense(iso.algebras.u(7), members=4),
+        IsoMP(),
+        0.2,
+        20,
+        5,
+    ),
+    "CompiledB herm(6) Anderson": (
+        lambda: _user_dense(iso.algebras.herm(6)),
+        IsoMP(solver=A3),
+        0.3,
+        20,
+        2,
+    ),
+    "CompiledB so(36) BLAS": (lambda: _user_dense(iso.algebras.so(36)), IsoMP(), 0.1, 10, 2),
+    "CompiledB su(34) BLAS": (lambda: _user_dense(iso.algebras.su(34)), IsoMP(), 0.1, 10, 2),
+    "CompiledB (R^3, x)^6": (lambda: _user_particles("so3"), IsoMP(), 0.1, 40, 4),
+    "CompiledB (R^3, x)^6 ensemble": (
+        lambda: _user_particles("so3", members=3),
+        IsoMP(),
+        0.1,
+        20,
+        4,
+    ),
+    "CompiledB (R^3, x)^6 spherical": (lambda: _user_particles("so3"), SMM(), 0.1, 40, 4),
+    "CompiledB (R^3, x_L)^6": (lambda: _user_particles("sl2"), IsoMP(), 0.05, 40, 4),
+    "CompiledB spin chain (generic particles)": (_user_chain, IsoMP(), 0.1, 30, 3),
+    "spin chain (fused)": (_chain, IsoMP(), 0.1, 40, 4),
+    "spin chain (fused), X0 = W": (_chain, IsoMP(initial_guess="state"), 0.1, 30, 3),
+    "spin chain (fused), Anderson": (_chain, IsoMP(solver=A3), 0.1, 30, 3),
+    "spin chain (fused) spherical": (_chain, SMM(), 0.1, 40, 4),
+    "spin chain ensemble 3 (fused)": (lambda: _chain(members=3), IsoMP(), 0.1, 20, 4),
+    "sphere vortices": (_sphere_vortices, IsoMP(), 0.01, 40, 5),
+    "sphere vortices spherical": (_sphere_vortices, SMM(), 0.01, 40, 5),
+    "sphere vortices ensemble": (lambda: _sphere_vortices(members=3), IsoMP(), 0.01, 20, 5),
+    "hyperbolic vortices 1": (
+        lambda: iso.models.hyperbolic_vortices(config=1),
+        IsoMP(),
+        0.01,
+        60,
+        6,
+    ),
+    "hyperbolic vortices 2": (
+        lambda: iso.models.hyperbolic_vortices(config=2),
+        IsoMP(),
+        0.001,
+        40,
+        5,
+    ),
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_compiled_equals_numpy(name: str) -> None:
+    """Same saved rows, final state, stored offsets, iterations and failures."""
+    make, method, h, n, save_every = CASES[name]
+    prob, y = make()
+    a, b = compiled_and_numpy(prob, method, y, h, n, save_every, chunks=(n // 3, n - n // 3))
+    assert a.label.startswith("compiled")
+    assert_same_run(a, b, iters_exact="Anderson" not in name)
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["rigid so(10)", "rigid ensemble 20 (blocks)", "so(40) BLAS", "spin chain (fused)",
+     "hyperbolic vortices 1", "CompiledB (R^3, x)^6 spherical", "brockett herm(6) in a frame"],
+)  # fmt: skip
+def test_chunks_give_the_same_run_bit_for_bit(name: str) -> None:
+    """A run split into calls anywhere is the same run (what makes resume bit for bit)."""
+    make, method, h, n, save_every = CASES[name]
+    prob, y = make()
+    whole = run_with(compiled_runner(prob, method, y, h), n, save_every)
+    split = run_with(compiled_runner(prob, method, y, h), n, save_every, chunks=(1, 5, n - 6))
+    assert np.array_equal(whole.rows, split.rows) and np.array_equal(whole.y, split.y)
+    for x, z in zip(whole.state[1:], split.state[1:], strict=True):
+        assert np.array_equal(x, z)
+    # a new runner started from the exported state continues the run exactly
+    stop = 2 * save_every  # a save point (where the loop checkpoints every layout)
+    part = run_with(compiled_runner(prob, method, y, h), n, save_every, chunks=(stop,))
+    rest = compiled_runner(prob, method, part.y, h, method_state=part.state, k=stop)
+    done = run_with(rest, n, save_every, chunks=(n - stop,))
+    assert np.array_equal(done.y, whole.y)
+
+
+def test_solve_runs_compiled_and_agrees_with_numpy() -> None:
+    prob, W0 = _rigid()
+    sol = iso.solve(prob, IsoMP(), W0, dt=0.1, n_steps=200, save_every=7)
+    ref = iso.solve(dataclasses.replace(prob, kernel=None), IsoMP(), W0, dt=0.1, n_steps=200,
+                    save_every=7)  # fmt: skip
+    assert sol.stats.runner.startswith("compiled") and ref.stats.runner == "NumPy"
+    assert np.array_equal(sol.ts, ref.ts)
+    assert np.max(np.abs(sol.ys - ref.ys)) <= 1e-13
+    assert sol.stats.n_iterations == ref.stats.n_iterations
+    # one B evaluation per fixed-point iteration, counted on both paths
+    assert sol.stats.n_B_evaluations == ref.stats.n_B_evaluations == sol.stats.n_iterations
+    assert sol.diagnostics.casimir_drift <= 1e-13
+
+
+@pytest.mark.parametrize("method", [IsoMP(), SMM()], ids=["isomp", "spherical"])
+def test_ensemble_member_that_fails_is_frozen_like_numpy(method: iso.Method) -> None:
+    """One diverging member: frozen at its last good state; the others finish (both paths)."""
+    prob, w0 = _user_particles("so3", N=4, members=4)
+    w0[2] *= 60.0  # h ||B|| far too large for this member
+    a, b = compiled_and_numpy(prob, method, w0, 0.5, 12, 3)
+    assert_same_run(a, b)
+    assert a.failures.step[2] >= 0 and (a.failures.step[[0, 1, 3]] == -1).all()
+    assert a.k == 12
+
+
+def test_blocked_ensemble_member_failure_matches_numpy() -> None:
+    prob, W0 = _rigid(members=20, scale=1.0)
+    W0[13] *= 400.0
+    a, b = compiled_and_numpy(prob, IsoMP(), W0, 0.1, 10, 2)
+    assert "blocks" in a.label
+    assert_same_run(a, b)
+    assert list(a.failures.failed) == [13]
+
+
+def test_single_system_failure_after_good_steps() -> None:
+    """A run continued (from its exported state) with a tighter iteration budget fails in the
+    middle: it ends at the last good state, on both paths."""
+    from isoflow._stepping import PythonRunner
+
+    prob, W0 = _rigid()
+    good = run_with(compiled_runner(prob, IsoMP(), W0, 0.1), 40, 40, chunks=(5,))
+    tight = IsoMP(solver=iso.FixedPoint(max_iter=2))
+    plain = dataclasses.replace(prob, kernel=None)
+    kw = {"method_state": good.state, "k": 5}
+    a = run_with(compiled_runner(prob, tight, good.y, 0.1, **kw), 40, 1, chunks=(35,))
+    b = run_with(PythonRunner(plain, tight, good.y, 0.1, **kw), 40, 1, chunks=(35,))
+    assert_same_run(a, b)
+    assert a.k == 5 and a.failures.step[0] == 5 and np.array_equal(a.y, good.y)
+
+
+def test_non_finite_state_fails_like_numpy() -> None:
+    prob, x0 = _sphere_vortices(3)
+    bad = x0.copy()
+    bad[1] = bad[0]  # two vortices at one point: B is infinite
+    a, b = compiled_and_numpy(prob, IsoMP(), bad, 0.01, 5, 1)
+    assert_same_run(a, b)
+    assert a.failures.step[0] == 0 and a.k == 0
+
+
+def test_user_function_that_raises_reaches_the_caller() -> None:
+    alg = iso.algebras.so(5)
+    d = np.arange(1.0, 6.0)
+    C = 0.5 * (d[:, None] + d[None, :])
+    W0 = alg.random(0)
+    W0 *= 0.3 / float(np.max(np.abs(W0)))  # the largest entry is 0.3 and moves
+    prob = iso.IsospectralProblem(
+        B=lambda W: C * W, algebra=alg, kernel=iso.CompiledB(uk.raises_when_large, (C, 0.31))
+    )
+    with pytest.raises(ValueError, match="entry too large"):
+        iso.solve(prob, IsoMP(), W0, dt=0.1, n_steps=500)
+
+
+def test_compiled_b_is_checked() -> None:
+    alg = iso.algebras.so(4)
+    with pytest.raises(TypeError, match="numba-compiled"):
+        iso.CompiledB(lambda W, out: None)
+    with pytest.raises(TypeError, match="args must be a tuple"):
+        iso.CompiledB(uk.neighbours, [1.0])
+    bad = iso.IsospectralProblem(algebra=alg, kernel=iso.CompiledB(uk.returns_nothing_useful))
+    with pytest.raises(iso.InvalidBError, match="does not compile"):
+        iso.solve(bad, IsoMP(), alg.random(0), dt=0.1, n_steps=2)
+    # a kernel that is not the problem's B is caught before the run
+    C = np.ones((4, 4))
+    wrong = iso.IsospectralProblem(
+        B=lambda W: -C * W, algebra=alg, kernel=iso.CompiledB(uk.cubic_elementwise, (C,))
+    )
+    with pytest.raises(iso.InvalidBError, match="does not describe its B"):
+        iso.solve(wrong, IsoMP(), alg.random(0), dt=0.1, n_steps=2)
+
+
+def test_compiled_b_alone_defines_the_problem() -> None:
+    """A problem given only a CompiledB gets its Python B from it (B written once)."""
+    alg = iso.algebras.u(5)
+    ref = uk.cubic_problem(alg, seed=4)
+    only = iso.IsospectralProblem(algebra=alg, kernel=ref.kernel)
+    W = 0.2 * alg.random(1, batch=(2, 3))
+    assert np.max(np.abs(only.B(W) - ref.B(W))) <= 1e-14 * np.max(np.abs(ref.B(W)))
+    sol = iso.solve(dataclasses.replace(only, kernel=None), IsoMP(), W[0, 0], dt=0.1, n_steps=20)
+    assert sol.stats.runner == "NumPy" and sol.success
+
+
+@pytest.mark.parametrize(
+    "setup",
+    [
+        lambda: (iso.models.rigid_body(4)[0], iso.Newton()),
+        lambda: (iso.models.rigid_body(4)[0], None),
+        lambda: (iso.models.heisenberg_chain(5)[0], "classical"),
+    ],
+    ids=["newton", "no kernel", "classical midpoint"],
+)
+def test_runs_without_a_compiled_path_take_numpy(setup) -> None:
+    prob, which = setup()
+    if which is None:
+        prob, method = dataclasses.replace(prob, kernel=None), IsoMP()
+    elif which == "classical":
+        method = iso.ClassicalMidpoint()
+    else:
+        method = IsoMP(solver=which)
+    y0 = prob.algebra.random(0) * 0.1
+    assert compiled_runner(prob, method, y0, 0.1) is None
+    assert iso.solve(prob, method, y0, dt=0.1, n_steps=3).stats.runner == "NumPy"
+
+
+def _isolated_threaded_ensembles() -> None:
+    """Members over numba threads give the serial answer (run in a fresh process)."""
+    import numba
+
+    from isoflow.threads import available_cores, thread_limits
+
+    if available_cores() < 2:
+        return
+    for name in (
+        "rigid ensemble 20 (blocks)",
+        "CompiledB u(7) ensemble 4",
+        "sphere vortices ensemble",
+    ):
+        make, method, h, n, save_every = CASES[name]
+        prob, y = make()
+        with thread_limits(blas=1, numba=1):
+            serial = run_with(compiled_runner(prob, method, y, h), n, save_every)
+        with thread_limits(blas=1):
+            r = compiled_runner(prob, method, y, h)
+            assert r.parallel and numba.get_num_threads() > 1
+            threaded = run_with(r, n, save_every)
+        assert np.array_equal(serial.rows, threaded.rows), name
+
+
+def test_threaded_ensembles_equal_serial() -> None:
+    here = os.path.dirname(os.path.abspath(__file__))
+    code = f"import sys; sys.path.insert(0, {here!r}); import test_compiled as t; "
+    code += "t._isolated_threaded_ensembles()"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -1,0 +1,87 @@
+"""Fields written the way a user writes them (``iso.CompiledB``), for the tests.
+
+Module-level ``@numba.njit(cache=True)`` functions, so that numba caches them (and the compiled
+loops specialized on their types) across test runs.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+import isoflow as iso
+
+
+@numba.njit(cache=True)
+def cubic_elementwise(W, out, C):  # type: ignore[no-untyped-def]
+    """``B_ij = C_ij W_ij (1 + |W_ij|^2)``: nonlinear, in the normalizer when ``C`` is symmetric
+    (skew spaces) or antisymmetric (symmetric spaces)."""
+    n = W.shape[0]
+    for i in range(n):
+        for j in range(n):
+            w = W[i, j]
+            out[i, j] = C[i, j] * w * (1.0 + (w.real * w.real + w.imag * w.imag))
+
+
+def cubic_elementwise_numpy(C: np.ndarray):
+    """The same ``B`` in NumPy (broadcasting over leading axes)."""
+
+    def B(W):
+        return C * W * (1.0 + np.abs(W) ** 2)
+
+    return B
+
+
+@numba.njit(cache=True)
+def neighbours(W, out, c):  # type: ignore[no-untyped-def]
+    """``B_i = c (w_{i-1} + w_{i+1})`` on ``(N, 3)``, written plainly (AoS, no fusion)."""
+    N = W.shape[0]
+    for i in range(N):
+        im = i - 1 if i > 0 else N - 1
+        ip = i + 1 if i < N - 1 else 0
+        for a in range(3):
+            out[i, a] = c * (W[im, a] + W[ip, a])
+
+
+@numba.njit(cache=True)
+def precession(W, out, axis, strength):  # type: ignore[no-untyped-def]
+    """``B_i = strength * (axis . w_i) axis``: a nonlinear field on ``(N, 3)`` particles."""
+    for i in range(W.shape[0]):
+        d = axis[0] * W[i, 0] + axis[1] * W[i, 1] + axis[2] * W[i, 2]
+        for a in range(3):
+            out[i, a] = strength * d * axis[a]
+
+
+def precession_numpy(axis: np.ndarray, strength: float):
+    def B(W):
+        return strength * (W @ axis)[..., None] * axis
+
+    return B
+
+
+@numba.njit(cache=True)
+def returns_nothing_useful(W):  # type: ignore[no-untyped-def]
+    """Wrong signature for a field (one argument)."""
+    return W
+
+
+@numba.njit(cache=True)
+def raises_when_large(W, out, C, limit):  # type: ignore[no-untyped-def]
+    """``C * W``, raising once an entry exceeds ``limit`` (a user error mid-run)."""
+    n = W.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if abs(W[i, j]) > limit:
+                raise ValueError("entry too large")
+            out[i, j] = C[i, j] * W[i, j]
+
+
+def cubic_problem(alg: iso.algebras.Algebra, seed: int = 0, scale: float = 1.0):
+    """A nonlinear ``CompiledB`` problem on a dense space, with the matching NumPy ``B``."""
+    rng = np.random.default_rng(seed)
+    n = alg.shape[0]
+    A = rng.uniform(0.5, 1.5, (n, n))
+    symmetric_space = isinstance(alg, (iso.algebras.Symmetric, iso.algebras.Hermitian))
+    C = scale * (0.5 * (A - A.T) if symmetric_space else 0.5 * (A + A.T))
+    kernel = iso.CompiledB(cubic_elementwise, (C,))
+    return iso.IsospectralProblem(B=cubic_elementwise_numpy(C), algebra=alg, kernel=kernel)
