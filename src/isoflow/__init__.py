@@ -37,6 +37,7 @@ from .kernels import PairwiseVortex as PairwiseVortex
 from .kernels import SpinNeighbourSum as SpinNeighbourSum
 from .methods import RK4 as RK4
 from .methods import ClassicalMidpoint as ClassicalMidpoint
+from .methods import Composition as Composition
 from .methods import IsoMP as IsoMP
 from .methods import Method as Method
 from .methods import SphericalMidpoint as SphericalMidpoint
@@ -59,6 +60,7 @@ __all__ = [
     "RK4",
     "ClassicalMidpoint",
     "CompiledB",
+    "Composition",
     "ConvergenceError",
     "Diagnostics",
     "DtypeError",

@@ -4,6 +4,7 @@ from ._base import AdvanceResult as AdvanceResult
 from ._base import Method as Method
 from ._base import StepResult as StepResult
 from .classical_midpoint import ClassicalMidpoint as ClassicalMidpoint
+from .composition import Composition as Composition
 from .explicit_rk import RK4 as RK4
 from .isomp import IsoMP as IsoMP
 from .spherical_midpoint import SphericalMidpoint as SphericalMidpoint
@@ -12,6 +13,7 @@ __all__ = [
     "RK4",
     "AdvanceResult",
     "ClassicalMidpoint",
+    "Composition",
     "IsoMP",
     "Method",
     "SphericalMidpoint",
