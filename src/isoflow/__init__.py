@@ -39,6 +39,7 @@ from .methods import RK4 as RK4
 from .methods import ClassicalMidpoint as ClassicalMidpoint
 from .methods import Composition as Composition
 from .methods import IsoMP as IsoMP
+from .methods import IsoSyRK as IsoSyRK
 from .methods import Method as Method
 from .methods import SphericalMidpoint as SphericalMidpoint
 from .methods import StepResult as StepResult
@@ -68,6 +69,7 @@ __all__ = [
     "FixedPoint",
     "InvalidBError",
     "IsoMP",
+    "IsoSyRK",
     "IsoflowError",
     "IsospectralProblem",
     "Kernel",

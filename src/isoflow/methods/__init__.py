@@ -7,6 +7,7 @@ from .classical_midpoint import ClassicalMidpoint as ClassicalMidpoint
 from .composition import Composition as Composition
 from .explicit_rk import RK4 as RK4
 from .isomp import IsoMP as IsoMP
+from .isosyrk import IsoSyRK as IsoSyRK
 from .spherical_midpoint import SphericalMidpoint as SphericalMidpoint
 
 __all__ = [
@@ -15,6 +16,7 @@ __all__ = [
     "ClassicalMidpoint",
     "Composition",
     "IsoMP",
+    "IsoSyRK",
     "Method",
     "SphericalMidpoint",
     "StepResult",
