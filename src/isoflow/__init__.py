@@ -37,7 +37,9 @@ from .kernels import PairwiseVortex as PairwiseVortex
 from .kernels import SpinNeighbourSum as SpinNeighbourSum
 from .methods import RK4 as RK4
 from .methods import ClassicalMidpoint as ClassicalMidpoint
+from .methods import Composition as Composition
 from .methods import IsoMP as IsoMP
+from .methods import IsoSyRK as IsoSyRK
 from .methods import Method as Method
 from .methods import SphericalMidpoint as SphericalMidpoint
 from .methods import StepResult as StepResult
@@ -59,6 +61,7 @@ __all__ = [
     "RK4",
     "ClassicalMidpoint",
     "CompiledB",
+    "Composition",
     "ConvergenceError",
     "Diagnostics",
     "DtypeError",
@@ -66,6 +69,7 @@ __all__ = [
     "FixedPoint",
     "InvalidBError",
     "IsoMP",
+    "IsoSyRK",
     "IsoflowError",
     "IsospectralProblem",
     "Kernel",

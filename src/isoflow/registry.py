@@ -6,6 +6,10 @@ file, and what :mod:`isoflow.io` stores as JSON in a result file)::
     {"model": "rigid-body", "params": {"n": 10}, "method": "isomp", "solver": "fixed-point",
      "rtol": 1e-14, "t0": 0.0, "dt": 0.1, "t1": 100.0, "save_every": 10}
 
+Method names are flat: a composition is ``"<base>-<scheme>"`` (e.g. ``"isomp-suzuki-4"``,
+``"spherical-midpoint-kahan-li-8"``), the Gauss IsoSyRK methods are ``"isosyrk-1"`` ..
+``"isosyrk-3"``, so a configuration needs no extra key.
+
 :func:`build` turns it back into ``(problem, y0, method, solve keyword arguments)``, which is how
 a run is resumed from its file.
 """
@@ -20,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from ._errors import IsoflowError
-from .methods import RK4, ClassicalMidpoint, IsoMP, Method, SphericalMidpoint
+from .methods import RK4, ClassicalMidpoint, Composition, IsoMP, IsoSyRK, Method, SphericalMidpoint
+from .methods.composition import SCHEMES
 from .models import brockett, heisenberg_chain, hyperbolic_vortices, rigid_body, toda
 from .nonlinear import FixedPoint, Newton
 from .problems import IsospectralProblem
@@ -109,11 +114,23 @@ SOLVERS: dict[str, Callable[[float | None], Any]] = {
     "newton": _solver_factory(Newton),
 }
 
+
+def _isosyrk(stages: int) -> Callable[[Any], Method]:
+    return lambda solver: IsoSyRK(stages, solver=solver)
+
+
+def _composed(base: Callable[..., Method], scheme: str) -> Callable[[Any], Method]:
+    return lambda solver: Composition(base(solver=solver), scheme)
+
+
 METHODS: dict[str, Callable[[Any], Method]] = {
     "isomp": lambda solver: IsoMP(solver=solver),
     "spherical-midpoint": lambda solver: SphericalMidpoint(solver=solver),
     "classical-midpoint": lambda solver: ClassicalMidpoint(solver=solver),
     "rk4": lambda solver: RK4(),
+    **{f"isosyrk-{s}": _isosyrk(s) for s in (1, 2, 3)},
+    **{f"isomp-{scheme}": _composed(IsoMP, scheme) for scheme in SCHEMES},
+    **{f"spherical-midpoint-{scheme}": _composed(SphericalMidpoint, scheme) for scheme in SCHEMES},
 }
 
 _RUN_KEYS = {"model", "params", "method", "solver", "rtol", "t0", "dt", "t1", "n_steps"}

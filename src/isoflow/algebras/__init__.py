@@ -21,6 +21,7 @@ from .sl2_vectors import SL2Vectors as SL2Vectors
 from .sl2_vectors import sl2_vectors as sl2_vectors
 from .spin import SpinVectors as SpinVectors
 from .spin import so3_vectors as so3_vectors
+from .stacked import Stacked as Stacked
 from .symmetric import Symmetric as Symmetric
 from .symmetric import sym as sym
 from .symplectic import Symplectic as Symplectic
@@ -40,6 +41,7 @@ __all__ = [
     "SpecialOrthogonal",
     "SpecialUnitary",
     "SpinVectors",
+    "Stacked",
     "Symmetric",
     "Symplectic",
     "Unitary",

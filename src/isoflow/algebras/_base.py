@@ -24,7 +24,14 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from .._errors import DtypeError, NonFiniteError, NotInSpaceError, ParameterError, ShapeError
+from .._errors import (
+    DtypeError,
+    NonFiniteError,
+    NotInSpaceError,
+    ParameterError,
+    ShapeError,
+    UnsupportedAlgebraError,
+)
 
 __all__ = ["Algebra", "MatrixAlgebra"]
 
@@ -96,6 +103,27 @@ class Algebra(ABC):
     def _basis_matrix(self) -> sp.csr_array:
         """Sparse ``(dim, m)`` matrix whose rows are an orthonormal basis of ``V``,
         written in the real flat representation of :meth:`_flatten`."""
+
+    # ---- matrix representation -----------------------------------------------------------
+    def to_matrix(self, W: Array) -> Array:
+        """Matrices representing ``W`` (an element of ``V`` or of its normalizer).
+
+        A Lie algebra homomorphism for :meth:`bracket`,
+        ``to_matrix(bracket(A, X)) = [to_matrix(A), to_matrix(X)]``, used by methods that need
+        general matrix products (e.g. :class:`~isoflow.IsoSyRK`). Matrix spaces return ``W``;
+        the compact vector forms return one small matrix per particle,
+        shape ``(*batch, N, k, k)``.
+
+        Raises
+        ------
+        UnsupportedAlgebraError
+            The space has no matrix representation.
+        """
+        raise UnsupportedAlgebraError(f"{self.name} has no matrix representation")
+
+    def from_matrix(self, M: Array) -> Array:
+        """Inverse of :meth:`to_matrix` on its image (not projected: callers project)."""
+        raise UnsupportedAlgebraError(f"{self.name} has no matrix representation")
 
     # ---- derived machinery ----------------------------------------------------------------
     @property
@@ -319,6 +347,14 @@ class MatrixAlgebra(Algebra):
 
     def bracket(self, A: Array, X: Array) -> Array:
         return A @ X - X @ A
+
+    def to_matrix(self, W: Array) -> Array:
+        """The matrices themselves."""
+        return np.asarray(W)
+
+    def from_matrix(self, M: Array) -> Array:
+        """The matrices themselves (not projected)."""
+        return np.asarray(M)
 
     def dagger(self, Y: Array) -> Array:
         """Conjugate transpose over the last two axes."""

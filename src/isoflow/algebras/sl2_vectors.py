@@ -141,6 +141,15 @@ class SL2Vectors(ParticleVectors):
         r""":math:`w_i \cdot_L w_i` for each particle, shape ``(*batch, N)``."""
         return dot_L(W, W)
 
+    def to_matrix(self, W: Array) -> Array:
+        """:func:`phi` per particle, shape ``(*batch, N, 2, 2)`` (a homomorphism for
+        :meth:`bracket`, which is the matrix bracket of the images)."""
+        return phi(W)
+
+    def from_matrix(self, M: Array) -> Array:
+        """:func:`phi_inv` per particle (coordinates of the traceless part)."""
+        return phi_inv(M)
+
     def phi(self, W: ArrayLike) -> Array:
         """:func:`phi` applied to every particle: shape ``(*batch, N, 2, 2)``."""
         return phi(W)

@@ -142,6 +142,15 @@ class SpinVectors(ParticleVectors):
         r""":math:`|w_i|^2` for each particle, shape ``(*batch, N)``."""
         return dot(W, W)
 
+    def to_matrix(self, W: Array) -> Array:
+        """:func:`hat` per particle, shape ``(*batch, N, 3, 3)`` (a homomorphism for
+        :meth:`bracket`)."""
+        return hat(W)
+
+    def from_matrix(self, M: Array) -> Array:
+        """:func:`vee` per particle (the vector of the skew part)."""
+        return vee(M)
+
     def hat(self, W: ArrayLike) -> Array:
         """:func:`hat` applied to every particle: shape ``(*batch, N, 3, 3)``."""
         return hat(W)

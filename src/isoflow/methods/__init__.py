@@ -3,14 +3,18 @@
 from ._base import Method as Method
 from ._base import StepResult as StepResult
 from .classical_midpoint import ClassicalMidpoint as ClassicalMidpoint
+from .composition import Composition as Composition
 from .explicit_rk import RK4 as RK4
 from .isomp import IsoMP as IsoMP
+from .isosyrk import IsoSyRK as IsoSyRK
 from .spherical_midpoint import SphericalMidpoint as SphericalMidpoint
 
 __all__ = [
     "RK4",
     "ClassicalMidpoint",
+    "Composition",
     "IsoMP",
+    "IsoSyRK",
     "Method",
     "SphericalMidpoint",
     "StepResult",

@@ -54,7 +54,7 @@ class StepResult:
 
 
 class Method:
-    """Base of the integrators: a small frozen dataclass with ``init`` and ``step``.
+    r"""Base of the integrators: a small frozen dataclass with ``init`` and ``step``.
 
     A method advances ``problem`` by one fixed step ``h`` with :meth:`step`; the time loop owns
     everything else (saving, diagnostics, failure policy, the ensemble members that failed).
@@ -72,10 +72,22 @@ class Method:
         Classical order of accuracy.
     implicit : bool
         Whether a nonlinear solve is involved (and may fail).
+    symmetric : bool
+        Whether the step map is symmetric (self-adjoint), :math:`\Phi_{-h} \circ \Phi_h =
+        \mathrm{id}`; only symmetric methods can be raised in order by symmetric composition
+        (:class:`~isoflow.Composition`).
+    name : str
+        Human-readable name (also recorded in result files and checked on resume).
+
+    Notes
+    -----
+    Every array in ``state`` that belongs to ensemble members has the batch axes leading,
+    shape ``(*batch, ...)``, so that members can be selected by indexing those axes.
     """
 
     order: ClassVar[int]
     implicit: ClassVar[bool]
+    symmetric: ClassVar[bool] = False
     name: ClassVar[str]
 
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:

@@ -36,6 +36,7 @@ class ClassicalMidpoint(Method):
 
     order: ClassVar[int] = 2
     implicit: ClassVar[bool] = True
+    symmetric: ClassVar[bool] = True
     name: ClassVar[str] = "classical midpoint"
 
     def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:

@@ -25,6 +25,7 @@ class RK4(Method):
 
     order: ClassVar[int] = 4
     implicit: ClassVar[bool] = False
+    symmetric: ClassVar[bool] = False
     name: ClassVar[str] = "RK4"
 
     def step(

@@ -85,6 +85,7 @@ class IsoMP(Method):
 
     order: ClassVar[int] = 2
     implicit: ClassVar[bool] = True
+    symmetric: ClassVar[bool] = True
     name: ClassVar[str] = "IsoMP"
 
     def __post_init__(self) -> None:

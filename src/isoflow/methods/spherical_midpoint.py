@@ -124,6 +124,7 @@ class SphericalMidpoint(Method):
 
     order: ClassVar[int] = 2
     implicit: ClassVar[bool] = True
+    symmetric: ClassVar[bool] = True
     name: ClassVar[str] = "spherical midpoint"
 
     def __post_init__(self) -> None:
