@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import isoflow as iso
+import isoflow.plotting
 from isoflow import sphere
 from isoflow.sphere._grid import _to_alm
 
@@ -271,3 +272,15 @@ def test_errors_are_typed() -> None:
         iso.models.euler_sphere(N=5, W0=W)
     with pytest.raises(iso.NotInSpaceError):
         iso.models.euler_sphere(N=6, W0=np.eye(6, dtype=complex))
+
+
+def test_condensation_experiment_runs_and_plots() -> None:
+    """A small version of the experiment: its summary, its checks on rounding, its figure."""
+    res = iso.experiments.euler_sphere(N=16, T=10.0, progress=False)
+    s = res.summary
+    assert s["parameters"]["N"] == 16 and s["parameters"]["n_steps"] == 50  # h = 3.2 / N
+    for key in ("casimirs_rounding", "casimir_traces_rounding", "angular_momentum_rounding"):
+        assert s["checks"][key]["ok"], s["checks"][key]
+    assert res.data["coefficients"].shape == (len(res.data["ts"]), 16 * 16 - 1)
+    fig = iso.plotting.plot_experiment(res)
+    assert len([ax for ax in fig.axes if ax.get_title()]) == 6

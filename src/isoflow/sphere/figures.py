@@ -67,8 +67,14 @@ def draw_map(
     nphi: int | None = None,
     vmax: float | None = None,
     cmap: str = _CMAP,
+    interpolation: str = "bilinear",
 ) -> Any:
-    """Draw the vorticity on a global latitude–longitude map into ``ax``; returns the image."""
+    """Draw the vorticity on a global latitude–longitude map into ``ax``; returns the image.
+
+    The field is synthesized on an equiangular (Clenshaw–Curtis) grid, by default about two
+    points per wavelength of degree ``lmax`` and at least ``90 x 180``; ``interpolation`` is
+    matplotlib's (``"nearest"`` shows the grid cells and makes smaller PNG files).
+    """
     c = _coefficients(data)
     if c.ndim != 1:
         raise ShapeError(f"draw_map: give one vorticity field, got shape {c.shape}")
@@ -80,7 +86,7 @@ def draw_map(
     lim = _symmetric_limit(vals, vmax)
     im = ax.imshow(
         vals, extent=(0.0, 360.0, -90.0, 90.0), origin="upper", cmap=cmap, vmin=-lim,
-        vmax=lim, aspect="auto", interpolation="bilinear",
+        vmax=lim, aspect="auto", interpolation=interpolation,
     )  # fmt: skip
     ax.set_xlabel("longitude [deg]")
     ax.set_ylabel("latitude [deg]")
