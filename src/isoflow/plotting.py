@@ -167,7 +167,11 @@ def _euler_sphere(res: ExperimentResult) -> Figure:
     axes = fig.subplots(2, 3)
     lmax = int(np.sqrt(coeffs.shape[-1] + 1)) - 1
     # two points per wavelength, shown as cells: smaller PNG files for noisy fields
-    grid = {"ntheta": 2 * lmax + 2, "nphi": 4 * lmax + 4, "interpolation": "nearest"}
+    grid: dict[str, Any] = {
+        "ntheta": 2 * lmax + 2,
+        "nphi": 4 * lmax + 4,
+        "interpolation": "nearest",
+    }
     for ax, k, what in ((axes[0, 0], 0, "initial"), (axes[0, 1], -1, "final")):
         im = draw_map(ax, coeffs[k], **grid)  # each with its own colour scale
         ax.set_title(f"{what} vorticity $\\omega$, t = {ts[k]:g}")

@@ -50,9 +50,10 @@ def lm_index(l: ArrayLike, m: ArrayLike) -> Any:
 def degree_order(lmax: int) -> tuple[Array, Array]:
     """The degrees ``l`` and orders ``m`` of the flat coefficient layout up to ``lmax``."""
     lmax = check_N(lmax, "lmax", minimum=0)
-    ls = np.concatenate([np.full(2 * l + 1, l) for l in range(1, lmax + 1)] or [np.zeros(0)])
-    ms = np.concatenate([np.arange(-l, l + 1) for l in range(1, lmax + 1)] or [np.zeros(0)])
-    return ls.astype(np.int64), ms.astype(np.int64)
+    degrees = np.arange(1, lmax + 1, dtype=np.int64)
+    ls = np.repeat(degrees, 2 * degrees + 1)
+    ms = np.arange(ls.size, dtype=np.int64) + 1 - ls * ls - ls  # index = l^2 - 1 + l + m
+    return ls, ms
 
 
 def _lmax_of(ncoef: int, what: str) -> int:

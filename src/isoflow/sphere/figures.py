@@ -213,7 +213,7 @@ def plot_orthographic(
         lim = float(np.max(np.abs(synthesize(c, *default_grid_shape(_lmax_of(c.size, "c"))))))
     fig = Figure(figsize=(3.6 * len(centers) + 0.8, 3.9), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(centers)))
-    im = None
+    im: Any = None
     for ax, ctr in zip(axes, centers, strict=True):
         im = draw_orthographic(ax, c, center=ctr, vmax=lim, cmap=cmap, resolution=resolution)
         ax.set_title(f"view from lat {ctr[0]:g}°, lon {ctr[1]:g}°", fontsize=9)
