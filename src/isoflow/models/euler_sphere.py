@@ -152,7 +152,8 @@ def euler_sphere(
         vorticity), ``invariants``: ``"enstrophy"`` (:math:`\frac12\int q^2`, of the state),
         ``"angular_momentum"`` (:math:`\int\omega\,x_a\,dA`, ``(3,)``; only for
         ``omega = 0``) or ``"angular_momentum_z"`` (for ``omega != 0``); and
-        ``parameters``: ``N, omega, hbar, seed, initial, lmin, lmax, slope, rms``.
+        ``parameters``: ``N, omega, hbar, seed, initial`` (``"random"``, ``"coefficients"``,
+        ``"function"`` or ``"matrix"``) and, for random data, ``lmin, lmax, slope, rms``.
     Q0 : ndarray, shape (*batch, N, N)
         The initial state, :math:`W_0 + F`.
 
@@ -240,17 +241,9 @@ def euler_sphere(
     else:
         invariants["angular_momentum_z"] = lambda Q: angular_momentum(np.asarray(Q) - F)[..., 2]
 
-    parameters: dict[str, Any] = {
-        "N": N,
-        "omega": Om,
-        "hbar": h,
-        "seed": seed_,
-        "initial": kind,
-        "lmin": int(lmin),
-        "lmax": lmax_,
-        "slope": slope,
-        "rms": rms,
-    }
+    parameters: dict[str, Any] = {"N": N, "omega": Om, "hbar": h, "seed": seed_, "initial": kind}
+    if kind == "random":  # the spectrum of the random data
+        parameters.update(lmin=int(lmin), lmax=lmax_, slope=slope, rms=rms)
     problem = IsospectralProblem(
         algebra=alg,
         kernel=kernel,

@@ -31,11 +31,6 @@ __all__ = [
 Array = NDArray[Any]
 
 
-def _matrices(W: ArrayLike, what: str) -> tuple[Array, tuple[int, ...], int]:
-    flat, batch, N = _as_matrices(W, what)
-    return flat, batch, N
-
-
 def vorticity_levels(W: ArrayLike) -> Array:
     r"""The spectrum of the vorticity: eigenvalues of the Hermitian :math:`-iW`, ascending.
 
@@ -46,7 +41,7 @@ def vorticity_levels(W: ArrayLike) -> Array:
     -------
     ndarray, shape (*batch, N)
     """
-    flat, batch, N = _matrices(W, "vorticity_levels")
+    flat, batch, N = _as_matrices(W, "vorticity_levels")
     return np.linalg.eigvalsh(-1j * flat).reshape(*batch, N)
 
 
@@ -84,7 +79,7 @@ def energy(W: ArrayLike) -> Array:
     -------
     ndarray, shape batch
     """
-    flat, batch, N = _matrices(W, "energy")
+    flat, batch, N = _as_matrices(W, "energy")
     P = solve_poisson(flat)
     tr = np.einsum("kab,kab->k", np.conj(P), flat).real
     return (-2.0 * np.pi / N * tr).reshape(batch)
@@ -99,7 +94,7 @@ def enstrophy(W: ArrayLike) -> Array:
     -------
     ndarray, shape batch
     """
-    flat, batch, N = _matrices(W, "enstrophy")
+    flat, batch, N = _as_matrices(W, "enstrophy")
     tr = np.trace(flat, axis1=-2, axis2=-1)
     sq = np.sum(np.abs(flat) ** 2, axis=(-2, -1)) - np.abs(tr) ** 2 / N
     return (2.0 * np.pi / N * sq).reshape(batch)
@@ -161,7 +156,7 @@ def angular_momentum(W: ArrayLike) -> Array:
     -------
     ndarray, shape (*batch, 3)
     """
-    flat, batch, N = _matrices(W, "angular_momentum")
+    flat, batch, N = _as_matrices(W, "angular_momentum")
     Om = -1j * flat
     a = np.arange(N - 1)
     c = np.sqrt((a + 1.0) * (N - a - 1.0))  # (J_+)_{a+1, a}

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
-from ._basis import _coefficient_array, _lmax_of, coefficient_count, degree_order
+from ._basis import degree_order
 from ._basis import from_coefficients as _from_coefficients
 from ._grid import from_function
 from ._operators import check_N
@@ -107,14 +107,3 @@ def vorticity_from_function(
     """
     N = check_N(N)
     return _from_coefficients(from_function(f, N - 1, oversampling=oversampling), N)
-
-
-def _pad_coefficients(omega: ArrayLike, lmax: int) -> Array:
-    """Coefficients padded with zeros (or checked) to degree ``lmax``."""
-    c = _coefficient_array(omega, "coefficients")
-    have = _lmax_of(c.shape[-1], "coefficients")
-    if have > lmax:
-        raise ParameterError(f"coefficients go up to degree {have} > {lmax}")
-    out = np.zeros((*c.shape[:-1], coefficient_count(lmax)))
-    out[..., : c.shape[-1]] = c
-    return out
