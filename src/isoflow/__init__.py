@@ -13,6 +13,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from . import algebras as algebras
 from . import models as models
+from . import sphere as sphere
 from . import threads as threads
 from ._errors import ConvergenceError as ConvergenceError
 from ._errors import DtypeError as DtypeError
@@ -96,6 +97,7 @@ __all__ = [
     "reference_solution",
     "registry",
     "solve",
+    "sphere",
     "step",
     "threads",
 ]

@@ -157,6 +157,68 @@ def _vortex_inv(res: ExperimentResult) -> Figure:
     return fig
 
 
+def _euler_sphere(res: ExperimentResult) -> Figure:
+    from .sphere import degree_order
+    from .sphere.figures import draw_map
+
+    d, p = res.data, res.summary["parameters"]
+    ts, coeffs = d["ts"], d["coefficients"]
+    fig = Figure(figsize=(10.5, 6.2), layout="constrained")
+    axes = fig.subplots(2, 3)
+    lmax = int(np.sqrt(coeffs.shape[-1] + 1)) - 1
+    # two points per wavelength, shown as cells: smaller PNG files for noisy fields
+    grid: dict[str, Any] = {
+        "ntheta": 2 * lmax + 2,
+        "nphi": 4 * lmax + 4,
+        "interpolation": "nearest",
+    }
+    for ax, k, what in ((axes[0, 0], 0, "initial"), (axes[0, 1], -1, "final")):
+        im = draw_map(ax, coeffs[k], **grid)  # each with its own colour scale
+        ax.set_title(f"{what} vorticity $\\omega$, t = {ts[k]:g}")
+        fig.colorbar(im, ax=ax, shrink=0.8, label=r"$\omega$")
+    ls, _ = degree_order(lmax)
+    psi = -coeffs[-1] / (ls * (ls + 1.0))
+    im = draw_map(axes[0, 2], psi, cmap="PuOr_r", **grid)
+    axes[0, 2].set_title(f"final stream function $\\psi = \\Delta^{{-1}}\\omega$, t = {ts[-1]:g}")
+    fig.colorbar(im, ax=axes[0, 2], shrink=0.8, label=r"$\psi$")
+    ax = axes[1, 0]
+    top = max(float(np.max(E)) for E in d["spectra"].values())
+    for label, E in d["spectra"].items():
+        pos = np.asarray(E) > 1e-14 * top  # below: zero up to the rounding of the transform
+        ax.loglog(np.arange(1, len(E) + 1), np.where(pos, E, np.nan), label=label)
+    ax.set_xlabel("degree $l$")
+    ax.set_ylim(top * 1e-10, top * 3)
+    ax.set_ylabel(r"$E_l = \sum_m \omega_{lm}^2 / (l(l+1))$")
+    ax.set_title("energy spectrum")
+    ax.legend(fontsize=8)
+    ax = axes[1, 1]
+    ax.plot(ts, d["large_scale_fraction"], color="C2")
+    ax.set_ylim(0, 1)
+    ax.set_xlabel("time $t$")
+    ax.set_ylabel("energy fraction")
+    ax.set_title("condensation: energy in $l \\leq 3$")
+    ax = axes[1, 2]
+    C = np.asarray(d["casimirs"])
+    lam = np.max(np.abs(C[0]) ** (1.0 / np.arange(2, 2 + C.shape[1])))
+    for j in range(C.shape[1]):
+        k = j + 2
+        ax.semilogy(ts, _floor(C[:, j] - C[0, j]) / (4 * np.pi * lam**k), lw=0.8,
+                    label=f"$C_{{{k}}}$")  # fmt: skip
+    H = np.asarray(d["energy"])
+    ax.semilogy(ts, _floor(H - H[0]) / abs(H[0]), "k", lw=1.0, label="energy $H$")
+    ax.set_ylim(1e-17, 1)
+    ax.set_xlabel("time $t$")
+    ax.set_ylabel("relative variation")
+    ax.set_title("Casimirs and energy")
+    ax.legend(fontsize=7, ncol=2)
+    rot = f", $\\Omega$ = {p['omega']:g}" if p.get("omega") else ""
+    fig.suptitle(
+        f"Euler equations on the sphere (Zeitlin, su({p['N']})){rot}: IsoMP, h = {p['h']:.3g}, "
+        f"T = {p['T']:g}, random initial vorticity (seed {p['seed']})"
+    )
+    return fig
+
+
 _PLOTS: dict[str, Callable[[ExperimentResult], Figure]] = {
     "rigid-body": _rigid_body,
     "brockett": _brockett,
@@ -165,6 +227,7 @@ _PLOTS: dict[str, Callable[[ExperimentResult], Figure]] = {
     "spin-chain-error": _spin_error,
     "vortices-trajectories": _vortex_traj,
     "vortices-invariants": _vortex_inv,
+    "euler-sphere": _euler_sphere,
 }
 
 

@@ -26,7 +26,14 @@ import numpy as np
 from ._errors import IsoflowError
 from .methods import RK4, ClassicalMidpoint, Composition, IsoMP, IsoSyRK, Method, SphericalMidpoint
 from .methods.composition import SCHEMES
-from .models import brockett, heisenberg_chain, hyperbolic_vortices, rigid_body, toda
+from .models import (
+    brockett,
+    euler_sphere,
+    heisenberg_chain,
+    hyperbolic_vortices,
+    rigid_body,
+    toda,
+)
 from .nonlinear import FixedPoint, Newton
 from .problems import IsospectralProblem
 
@@ -96,6 +103,19 @@ MODELS: dict[str, ModelSpec] = {
         hyperbolic_vortices,
         {"config": (int, 1, "the paper's initial configuration, 1 or 2")},
         "three point vortices on the hyperbolic plane, sl(2,R)^3 (Sec. 3.4)",
+    ),
+    "euler-sphere": ModelSpec(
+        euler_sphere,
+        {
+            "N": (int, 128, "matrix size of su(N): degrees l <= N - 1"),
+            "omega": (float, 0.0, "angular velocity of the sphere"),
+            "seed": (int, 0, "seed of the random initial vorticity"),
+            "lmin": (int, 1, "lowest degree of the random initial vorticity"),
+            "lmax": (int, None, "highest degree of the random initial vorticity (min(10, N-1))"),
+            "slope": (float, None, "energy spectrum E_l ~ l^slope of the data (white if unset)"),
+            "rms": (float, 1.0, "root-mean-square initial vorticity"),
+        },
+        "Zeitlin's quantized Euler equations on the (rotating) sphere, su(N)",
     ),
 }
 

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ._common import ExperimentResult, fit_order
+from .euler_sphere import euler_sphere
 from .matrix_flows import brockett, rigid_body
 from .spin_chain import spin_chain_cost, spin_chain_energy, spin_chain_error
 from .vortices import vortices_invariants, vortices_trajectories
@@ -33,6 +34,7 @@ __all__ = [
     "EXPERIMENTS",
     "ExperimentResult",
     "brockett",
+    "euler_sphere",
     "fit_order",
     "rigid_body",
     "run_experiment",
@@ -52,6 +54,7 @@ EXPERIMENTS: dict[str, Callable[..., ExperimentResult]] = {
     "spin-chain-error": spin_chain_error,
     "vortices-trajectories": vortices_trajectories,
     "vortices-invariants": vortices_invariants,
+    "euler-sphere": euler_sphere,
 }
 
 

@@ -2,6 +2,8 @@
 
 from .._errors import ParameterError as ParameterError
 from .brockett import brockett as brockett
+from .euler_sphere import coriolis_matrix as coriolis_matrix
+from .euler_sphere import euler_sphere as euler_sphere
 from .heisenberg_chain import heisenberg_chain as heisenberg_chain
 from .hyperbolic_vortices import hyperbolic_vortices as hyperbolic_vortices
 from .rigid_body import rigid_body as rigid_body
@@ -14,6 +16,8 @@ from .toda import toda as toda
 __all__: list[str] = [
     "ParameterError",
     "brockett",
+    "coriolis_matrix",
+    "euler_sphere",
     "heisenberg_chain",
     "hyperbolic_vortices",
     "jacobi_coefficients",

@@ -1,0 +1,255 @@
+r"""Zeitlin's quantized Euler equations on the (rotating) sphere, on :math:`\mathfrak{su}(N)`.
+
+Continuum model: the incompressible Euler equations on the unit sphere in vorticity form,
+
+.. math::
+
+    \dot\omega = \{\omega + f, \psi\}, \qquad \Delta\psi = \omega, \qquad
+    u = n \times \nabla\psi, \qquad f = 2\Omega\cos\theta,
+
+with the Poisson bracket :math:`\{g, h\} = \frac{1}{\sin\theta}(\partial_\theta g\,
+\partial_\varphi h - \partial_\varphi g\,\partial_\theta h)` (so that :math:`\{x, y\} = z`;
+:math:`\{\omega, \psi\} = -u\cdot\nabla\omega`), colatitude :math:`\theta`, longitude
+:math:`\varphi`, and the sphere rotating with angular velocity :math:`\Omega` about the
+``z`` axis (:math:`f` is the Coriolis parameter; :math:`\Omega > 0` is eastward, in the
+direction of increasing :math:`\varphi`).
+
+Zeitlin's quantization (see :mod:`isoflow.sphere` for the conventions) replaces the vorticity
+by :math:`W = i\,T(\omega) \in \mathfrak{su}(N)`, the bracket by
+:math:`\frac{1}{\hbar}[\cdot,\cdot]` with :math:`\hbar = 2/\sqrt{N^2-1}`, and the Laplacian by
+the Hoppe–Yau :math:`\Delta_N`:
+
+.. math::
+
+    \dot W = \frac{1}{\hbar}[P, W + F], \qquad \Delta_N P = W, \qquad
+    F = i\,T(2\Omega z) = 2i\Omega\hbar J_3 .
+
+The state of the problem is the **absolute vorticity** :math:`Q = W + F` (for
+:math:`\Omega = 0`, :math:`Q = W`). Since :math:`F` is a degree-one harmonic,
+:math:`\Delta_N^{-1}F = -F/2`, and the flow is isospectral in :math:`Q` with an affine ``B``:
+
+.. math::
+
+    \dot Q = [B(Q), Q], \qquad
+    B(Q) = \frac{1}{\hbar}\Delta_N^{-1} Q + \frac{F}{2\hbar}
+         = \frac{1}{\hbar}\Delta_N^{-1} Q + i\Omega J_3,
+
+(:math:`\Delta_N^{-1}` on the traceless part). The Casimirs :math:`\operatorname{Tr}(Q^k)`,
+i.e. the integrals of powers of the absolute vorticity :math:`\omega + f`, are conserved (by
+IsoMP to rounding), and so is the kinetic energy of the relative vorticity :math:`W = Q - F`.
+The constant term :math:`i\Omega J_3` is the generator of the frame rotation: the solution is
+the non-rotating one seen from a frame turning with angular velocity :math:`\Omega`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._errors import ParameterError
+from ..algebras import su
+from ..kernels import CompiledB
+from ..problems import IsospectralProblem
+from ..sphere import (
+    angular_momentum,
+    energy,
+    enstrophy,
+    from_coefficients,
+    hbar,
+    laplacian_coefficients,
+    random_coefficients,
+    vorticity_from_function,
+)
+from ..sphere._operators import check_N
+
+__all__ = ["coriolis_matrix", "euler_sphere"]
+
+Array = NDArray[Any]
+
+
+def coriolis_matrix(N: int, omega: float) -> Array:
+    r"""The quantized Coriolis term :math:`F = i\,T(2\Omega\cos\theta) = 2i\Omega\hbar J_3`
+    (diagonal, in ``su(N)``), :math:`J_3 = \operatorname{diag}(-s, \dots, s)`."""
+    N = check_N(N)
+    m = np.arange(N) - 0.5 * (N - 1)
+    return np.diag(2j * float(omega) * hbar(N) * m)
+
+
+def _real_parameter(v: Any, what: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise ParameterError(f"euler_sphere: {what} must be a real number, got {v!r}")
+    if not np.isfinite(v):
+        raise ParameterError(f"euler_sphere: {what} must be finite, got {v!r}")
+    return float(v)
+
+
+def euler_sphere(
+    N: int = 128,
+    omega: float = 0.0,
+    initial: str | ArrayLike | Callable[[Array, Array], ArrayLike] = "random",
+    seed: int = 0,
+    *,
+    lmin: int = 1,
+    lmax: int | None = None,
+    slope: float | None = None,
+    rms: float = 1.0,
+    W0: ArrayLike | None = None,
+) -> tuple[IsospectralProblem, Array]:
+    r"""Zeitlin's model of the Euler equations on the sphere, and its initial state.
+
+    Equations (module docstring): :math:`\dot Q = [B(Q), Q]` on :math:`\mathfrak{su}(N)` with
+    :math:`B(Q) = \hbar^{-1}\Delta_N^{-1}Q + i\Omega J_3`, :math:`\hbar = 2/\sqrt{N^2-1}`,
+    where :math:`Q = W + F` is the absolute vorticity, :math:`W = i\sum_{l,m}\omega_{lm}
+    T_{lm}` the relative vorticity and :math:`F = 2i\Omega\hbar J_3` the Coriolis term. For
+    ``omega = 0``, :math:`Q = W` and :math:`B(W) = \Delta_N^{-1}W/\hbar`.
+
+    ``B`` is given as a compiled kernel
+    (``CompiledB(isoflow.sphere.compiled.euler_field, ...)``, ``O(N^2)`` per evaluation:
+    one tridiagonal solve per diagonal), from which the Python ``B`` is derived. It accepts
+    any matrix of ``u(N)`` (the IsoMP stage has a trace, which it ignores) and returns ``B``
+    in ``u(N)``.
+
+    Time is that of the continuum equations on the unit sphere (a vorticity of size one
+    turns fluid around in times of order one); the energy is
+    :math:`H = -\frac{2\pi}{N}\operatorname{Re}\operatorname{Tr}(P^\dagger W) =
+    \frac12\sum\omega_{lm}^2/(l(l+1))`, the enstrophy :math:`\frac{2\pi}{N}\|Q\|_F^2 =
+    \frac12\int(\omega+f)^2`.
+
+    Parameters
+    ----------
+    N : int
+        Matrix size, ``N >= 2``; resolves degrees ``l <= N - 1``.
+    omega : float
+        Angular velocity :math:`\Omega` of the sphere (default 0).
+    initial : "random", array_like or callable
+        The initial *relative* vorticity :math:`\omega`:
+
+        * ``"random"``: seeded random smooth field, coefficients in ``lmin <= l <= lmax``
+          (:func:`isoflow.sphere.random_coefficients` with ``slope``, ``rms``);
+        * real coefficients of shape ``(*batch, (L+1)^2 - 1)``, ``L <= N - 1``, in the layout
+          of :func:`isoflow.sphere.lm_index` (a batch makes an ensemble);
+        * a function ``f(colatitude, longitude)`` (radians), transformed with ``ducc0``.
+    seed : int
+        Seed of the random initial data.
+    lmin, lmax : int
+        Band of the random initial data (``lmax`` default ``min(10, N - 1)``).
+    slope : float or None
+        Expected energy spectrum :math:`E_l \propto l^{\mathrm{slope}}` of the random data;
+        ``None``: white coefficients.
+    rms : float
+        Root-mean-square relative vorticity of the random data (default 1).
+    W0 : array_like, optional
+        The initial relative vorticity as matrices ``(*batch, N, N)`` in ``su(N)``, instead of
+        ``initial``.
+
+    Returns
+    -------
+    problem : IsospectralProblem
+        On ``su(N)`` with the compiled kernel, ``hamiltonian`` (energy of the relative
+        vorticity), ``invariants``: ``"enstrophy"`` (:math:`\frac12\int q^2`, of the state),
+        ``"angular_momentum"`` (:math:`\int\omega\,x_a\,dA`, ``(3,)``; only for
+        ``omega = 0``) or ``"angular_momentum_z"`` (for ``omega != 0``); and
+        ``parameters``: ``N, omega, hbar, seed, initial`` (``"random"``, ``"coefficients"``,
+        ``"function"`` or ``"matrix"``) and, for random data, ``lmin, lmax, slope, rms``.
+    Q0 : ndarray, shape (*batch, N, N)
+        The initial state, :math:`W_0 + F`.
+
+    Raises
+    ------
+    ParameterError
+        Bad ``N``, ``omega``, ``rms``, band, an unknown ``initial`` string, or both
+        ``initial`` data and ``W0``.
+    ShapeError
+        Coefficients of a wrong length or of degree above ``N - 1``; ``W0`` of a wrong shape.
+    NotInSpaceError
+        ``W0`` not in ``su(N)``.
+
+    References
+    ----------
+    V. Zeitlin, Finite-mode analogs of 2D ideal hydrodynamics: coadjoint orbits and local
+    canonical structure, Physica D 49 (1991) 353–362; Self-consistent finite-mode
+    approximations for the hydrodynamics of an incompressible fluid on nonrotating and
+    rotating spheres, Phys. Rev. Lett. 93 (2004) 264501.
+    J. Hoppe, S.-T. Yau, Some properties of matrix harmonics on :math:`S^2`, Comm. Math.
+    Phys. 195 (1998) 67–77.
+    K. Modin, M. Viviani, A Casimir preserving scheme for long-time simulation of spherical
+    ideal hydrodynamics, J. Fluid Mech. 884 (2020) A22.
+    P. Cifani, M. Viviani, K. Modin, An efficient geometric method for incompressible
+    hydrodynamics on the sphere, J. Comput. Phys. 473 (2023) 111772.
+
+    Examples
+    --------
+    >>> import isoflow as iso
+    >>> prob, W0 = iso.models.euler_sphere(N=16, seed=1)
+    >>> sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=20)
+    >>> bool(sol.diagnostics.casimir_drift < 1e-12)
+    True
+    """
+    N = check_N(N, "euler_sphere: N")
+    Om = _real_parameter(omega, "omega")
+    rms = _real_parameter(rms, "rms")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise ParameterError(f"euler_sphere: seed must be an integer, got {seed!r}")
+    seed_ = int(seed)
+    alg = su(N)
+    h = hbar(N)
+    lmax_ = min(10, N - 1) if lmax is None else check_N(lmax, "euler_sphere: lmax", minimum=1)
+    if lmax_ > N - 1:
+        raise ParameterError(f"euler_sphere: lmax must be <= N - 1 = {N - 1}, got {lmax_}")
+
+    kind: str
+    if W0 is not None:
+        if not (isinstance(initial, str) and initial == "random"):
+            raise ParameterError("euler_sphere: give the initial vorticity by initial or W0")
+        W = alg.validate(W0, "W0")
+        kind = "matrix"
+    elif isinstance(initial, str):
+        if initial != "random":
+            raise ParameterError(
+                f"euler_sphere: initial must be 'random', coefficients or a function, "
+                f"got {initial!r}"
+            )
+        c = random_coefficients(lmax_, lmin=lmin, slope=slope, rms=rms, seed=seed_)
+        W = from_coefficients(c, N)
+        kind = "random"
+    elif callable(initial):
+        W = vorticity_from_function(initial, N)
+        kind = "function"
+    else:
+        W = from_coefficients(initial, N)
+        kind = "coefficients"
+
+    F = coriolis_matrix(N, Om)
+    Q0 = W + F
+    coef = laplacian_coefficients(N)
+    shift = 1j * Om * (np.arange(N) - 0.5 * (N - 1))  # F / (2 hbar)
+    from ..sphere.compiled import euler_field
+
+    kernel = CompiledB(
+        euler_field, (coef.inv_piv, coef.mult, 1.0 / h, shift), name="euler_sphere_field"
+    )
+
+    def hamiltonian(Q: Array) -> Array:
+        return energy(np.asarray(Q) - F)
+
+    invariants: dict[str, Callable[[Array], Array]] = {"enstrophy": enstrophy}
+    if Om == 0.0:
+        invariants["angular_momentum"] = angular_momentum
+    else:
+        invariants["angular_momentum_z"] = lambda Q: angular_momentum(np.asarray(Q) - F)[..., 2]
+
+    parameters: dict[str, Any] = {"N": N, "omega": Om, "hbar": h, "seed": seed_, "initial": kind}
+    if kind == "random":  # the spectrum of the random data
+        parameters.update(lmin=int(lmin), lmax=lmax_, slope=slope, rms=rms)
+    problem = IsospectralProblem(
+        algebra=alg,
+        kernel=kernel,
+        hamiltonian=hamiltonian,
+        invariants=invariants,
+        name=f"Euler equations on the sphere, su({N})" + (f", Omega = {Om:g}" if Om else ""),
+        parameters=parameters,
+    )
+    return problem, Q0

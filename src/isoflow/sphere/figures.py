@@ -1,0 +1,394 @@
+r"""Figures of vorticity on the sphere: maps, orthographic views, spectra, invariants, movies.
+
+Every function returns a :class:`matplotlib.figure.Figure` built without ``pyplot`` (no
+global state, renders headless). Inputs are vorticity matrices ``(N, N)`` (complex) or real
+coefficients (the layout of :func:`isoflow.sphere.lm_index`); matplotlib is imported when a
+function is called. The orthographic projection is computed here (no cartopy): each pixel of
+the disk is mapped to its point on the sphere and the expansion is evaluated there exactly
+with ``ducc0`` (:func:`isoflow.sphere.evaluate`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._errors import ParameterError, ShapeError
+from ._basis import _coefficient_array, _lmax_of, to_coefficients
+from ._grid import default_grid_shape, evaluate, synthesize
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "animate",
+    "draw_map",
+    "draw_orthographic",
+    "plot_energy_spectrum",
+    "plot_invariants",
+    "plot_map",
+    "plot_orthographic",
+]
+
+Array = NDArray[Any]
+_CMAP = "RdBu_r"
+
+
+def _coefficients(data: ArrayLike) -> Array:
+    """Real coefficients of matrices ``(*batch, N, N)`` or of coefficients themselves."""
+    arr = np.asarray(data)
+    if np.iscomplexobj(arr):
+        if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
+            raise ShapeError(f"expected (*batch, N, N) vorticity matrices, got {arr.shape}")
+        return to_coefficients(arr)
+    c = _coefficient_array(arr, "coefficients")
+    _lmax_of(c.shape[-1], "coefficients")
+    return c
+
+
+def _symmetric_limit(values: Array, vmax: float | None) -> float:
+    if vmax is not None:
+        return float(vmax)
+    v = float(np.max(np.abs(values))) if values.size else 1.0
+    return v if v > 0 else 1.0
+
+
+def draw_map(
+    ax: Axes,
+    data: ArrayLike,
+    *,
+    ntheta: int | None = None,
+    nphi: int | None = None,
+    vmax: float | None = None,
+    cmap: str = _CMAP,
+    interpolation: str = "bilinear",
+) -> Any:
+    """Draw the vorticity on a global latitude–longitude map into ``ax``; returns the image.
+
+    The field is synthesized on an equiangular (Clenshaw–Curtis) grid, by default about two
+    points per wavelength of degree ``lmax`` and at least ``90 x 180``; ``interpolation`` is
+    matplotlib's (``"nearest"`` shows the grid cells and makes smaller PNG files).
+    """
+    c = _coefficients(data)
+    if c.ndim != 1:
+        raise ShapeError(f"draw_map: give one vorticity field, got shape {c.shape}")
+    lmax = _lmax_of(c.shape[-1], "draw_map")
+    dt, dp = default_grid_shape(lmax)
+    ntheta, nphi = ntheta or max(dt, 90), nphi or max(dp, 180)
+    vals = synthesize(c, ntheta, nphi, geometry="CC")
+    vals = np.concatenate([vals, vals[:, :1]], axis=1)  # close the longitude circle
+    lim = _symmetric_limit(vals, vmax)
+    im = ax.imshow(
+        vals, extent=(0.0, 360.0, -90.0, 90.0), origin="upper", cmap=cmap, vmin=-lim,
+        vmax=lim, aspect="auto", interpolation=interpolation,
+    )  # fmt: skip
+    ax.set_xlabel("longitude [deg]")
+    ax.set_ylabel("latitude [deg]")
+    ax.set_xticks(np.arange(0, 361, 60))
+    ax.set_yticks(np.arange(-90, 91, 30))
+    return im
+
+
+def _ortho_points(center: tuple[float, float], resolution: int) -> tuple[Array, Array, Array]:
+    """Colatitude, longitude of the visible disk's pixels, and the disk mask."""
+    lat0, lon0 = np.deg2rad(center[0]), np.deg2rad(center[1])
+    x = np.linspace(-1.0, 1.0, resolution)
+    X, Y = np.meshgrid(x, x[::-1])  # screen: x east, y north, row 0 at the top
+    inside = X**2 + Y**2 <= 1.0
+    Zv = np.sqrt(np.clip(1.0 - X**2 - Y**2, 0.0, None))
+    c = np.array([np.cos(lat0) * np.cos(lon0), np.cos(lat0) * np.sin(lon0), np.sin(lat0)])
+    e = np.array([-np.sin(lon0), np.cos(lon0), 0.0])
+    n = np.cross(c, e)
+    P = X[..., None] * e + Y[..., None] * n + Zv[..., None] * c
+    colat = np.arccos(np.clip(P[..., 2], -1.0, 1.0))
+    lon = np.mod(np.arctan2(P[..., 1], P[..., 0]), 2.0 * np.pi)
+    return colat, lon, inside
+
+
+def _project(lat: Array, lon: Array, center: tuple[float, float]) -> tuple[Array, Array, Array]:
+    """Screen coordinates of points (radians) and whether they face the viewer."""
+    lat0, lon0 = np.deg2rad(center[0]), np.deg2rad(center[1])
+    p = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
+    c = np.array([np.cos(lat0) * np.cos(lon0), np.cos(lat0) * np.sin(lon0), np.sin(lat0)])
+    e = np.array([-np.sin(lon0), np.cos(lon0), 0.0])
+    n = np.cross(c, e)
+    return p @ e, p @ n, p @ c > 0
+
+
+def draw_orthographic(
+    ax: Axes,
+    data: ArrayLike,
+    *,
+    center: tuple[float, float] = (30.0, 0.0),
+    resolution: int = 200,
+    vmax: float | None = None,
+    cmap: str = _CMAP,
+    graticule: bool = True,
+) -> Any:
+    """Draw the vorticity seen from above ``center = (latitude, longitude)`` [deg] into
+    ``ax`` (orthographic projection of the visible hemisphere); returns the image."""
+    c = _coefficients(data)
+    if c.ndim != 1:
+        raise ShapeError(f"draw_orthographic: give one vorticity field, got shape {c.shape}")
+    colat, lon, inside = _ortho_points(center, int(resolution))
+    vals = np.full(colat.shape, np.nan)
+    vals[inside] = evaluate(c, colat[inside], lon[inside])
+    lim = _symmetric_limit(vals[inside], vmax)
+    im = ax.imshow(
+        np.ma.masked_invalid(vals), extent=(-1, 1, -1, 1), origin="upper", cmap=cmap,
+        vmin=-lim, vmax=lim, interpolation="bilinear",
+    )  # fmt: skip
+    t = np.linspace(0, 2 * np.pi, 361)
+    ax.plot(np.cos(t), np.sin(t), color="0.2", lw=0.8)
+    if graticule:
+        s = np.linspace(-np.pi, np.pi, 361)
+        for la in np.deg2rad(np.arange(-60, 61, 30)):
+            x, y, vis = _project(np.full_like(s, la), s, center)
+            ax.plot(np.where(vis, x, np.nan), np.where(vis, y, np.nan), color="0.4", lw=0.4)
+        s = np.linspace(-np.pi / 2, np.pi / 2, 181)
+        for lo in np.deg2rad(np.arange(0, 360, 30)):
+            x, y, vis = _project(s, np.full_like(s, lo), center)
+            ax.plot(np.where(vis, x, np.nan), np.where(vis, y, np.nan), color="0.4", lw=0.4)
+    ax.set_xlim(-1.05, 1.05)
+    ax.set_ylim(-1.05, 1.05)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    return im
+
+
+def _title(N: int | None, extra: str | None) -> str:
+    base = "vorticity $\\omega$" + (f", N = {N}" if N else "")
+    return base + (f", {extra}" if extra else "")
+
+
+def _N_of(data: ArrayLike) -> int | None:
+    arr = np.asarray(data)
+    return int(arr.shape[-1]) if np.iscomplexobj(arr) and arr.ndim >= 2 else None
+
+
+def plot_map(
+    data: ArrayLike,
+    *,
+    title: str | None = None,
+    vmax: float | None = None,
+    cmap: str = _CMAP,
+    ntheta: int | None = None,
+    nphi: int | None = None,
+) -> Figure:
+    """The vorticity of one matrix (or coefficient set) on a latitude–longitude map."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 4.2), layout="constrained")
+    ax = fig.subplots()
+    im = draw_map(ax, data, ntheta=ntheta, nphi=nphi, vmax=vmax, cmap=cmap)
+    fig.colorbar(im, ax=ax, label=r"$\omega$ [1/time]", shrink=0.9)
+    ax.set_title(title or _title(_N_of(data), "equirectangular map"))
+    return fig
+
+
+def plot_orthographic(
+    data: ArrayLike,
+    *,
+    centers: Sequence[tuple[float, float]] = ((30.0, 0.0), (30.0, 180.0)),
+    title: str | None = None,
+    vmax: float | None = None,
+    cmap: str = _CMAP,
+    resolution: int = 200,
+) -> Figure:
+    """The vorticity seen from one or more viewpoints ``(latitude, longitude)`` [deg]."""
+    from matplotlib.figure import Figure
+
+    c = _coefficients(data)
+    centers = list(centers)
+    if not centers:
+        raise ParameterError("plot_orthographic: give at least one center")
+    lim = vmax
+    if lim is None:
+        lim = float(np.max(np.abs(synthesize(c, *default_grid_shape(_lmax_of(c.size, "c"))))))
+    fig = Figure(figsize=(3.6 * len(centers) + 0.8, 3.9), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(centers)))
+    im: Any = None
+    for ax, ctr in zip(axes, centers, strict=True):
+        im = draw_orthographic(ax, c, center=ctr, vmax=lim, cmap=cmap, resolution=resolution)
+        ax.set_title(f"view from lat {ctr[0]:g}°, lon {ctr[1]:g}°", fontsize=9)
+    fig.colorbar(im, ax=list(axes), label=r"$\omega$ [1/time]", shrink=0.85)
+    fig.suptitle(title or _title(_N_of(data), "orthographic views"))
+    return fig
+
+
+def plot_energy_spectrum(
+    spectra: Mapping[str, ArrayLike],
+    *,
+    title: str | None = None,
+    reference_slopes: Sequence[float] = (-3.0,),
+) -> Figure:
+    r"""Log–log energy spectra :math:`E_l` against degree ``l``.
+
+    ``spectra`` maps a label (e.g. ``"t = 0"``) to either a spectrum ``(lmax,)`` (degrees
+    ``1..lmax``) or a vorticity matrix ``(N, N)`` (complex; its spectrum is computed).
+    ``reference_slopes`` draws dashed power laws :math:`l^{s}` for orientation.
+    """
+    from matplotlib.figure import Figure
+
+    from ._diagnostics import energy_spectrum
+
+    fig = Figure(figsize=(6, 4.5), layout="constrained")
+    ax = fig.subplots()
+    top, bottom = 0.0, np.inf
+    lmax_all = 1
+    for label, d in spectra.items():
+        arr = np.asarray(d)
+        E = energy_spectrum(arr) if np.iscomplexobj(arr) else np.asarray(arr, dtype=float)
+        ls = np.arange(1, E.shape[-1] + 1)
+        pos = E > 0
+        ax.loglog(ls, np.where(pos, E, np.nan), label=label)  # zero degrees left out
+        if np.any(pos):
+            top = max(top, float(np.max(E[pos])))
+            bottom = min(bottom, float(np.min(E[pos])))
+        lmax_all = max(lmax_all, int(ls[-1]))
+    if top > 0:
+        ls = np.arange(1, lmax_all + 1)
+        for s in reference_slopes:
+            ax.loglog(ls, top * ls**s, "k--", lw=0.7, label=f"$l^{{{s:g}}}$")
+        ax.set_ylim(max(0.3 * bottom, top * 1e-14), top * 3)
+    ax.set_xlabel("degree $l$")
+    ax.set_ylabel(r"$E_l = \sum_m \omega_{lm}^2 / (l(l+1))$")
+    ax.set_title(title or "energy spectrum")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_invariants(
+    ts: ArrayLike,
+    *,
+    casimirs: ArrayLike | None = None,
+    energy: ArrayLike | None = None,
+    enstrophy: ArrayLike | None = None,
+    title: str | None = None,
+) -> Figure:
+    r"""Relative variation of the invariants against time (log scale).
+
+    ``casimirs`` ``(n_t, K)`` (e.g. :func:`isoflow.sphere.casimirs`, ``k = 2..K+1``),
+    ``energy`` and ``enstrophy`` ``(n_t,)``: each curve is :math:`|I(t) - I(0)| / |I(0)|`
+    (Casimirs of odd order, which may vanish initially, relative to
+    :math:`\max_t |C_k|` instead).
+    """
+    from matplotlib.figure import Figure
+
+    t = np.asarray(ts, dtype=float)
+    fig = Figure(figsize=(7, 5), layout="constrained")
+    axes = fig.subplots(2, 1, sharex=True)
+    floor = 1e-18
+    if casimirs is not None:
+        C = np.asarray(casimirs, dtype=float).reshape(len(t), -1)
+        for j in range(C.shape[1]):
+            ref = abs(C[0, j]) if j % 2 == 0 else float(np.max(np.abs(C[:, j])))
+            ref = ref if ref > 0 else 1.0
+            axes[0].semilogy(t, np.maximum(np.abs(C[:, j] - C[0, j]) / ref, floor),
+                             lw=0.8, label=f"$C_{{{j + 2}}}$")  # fmt: skip
+        axes[0].legend(fontsize=8, ncol=C.shape[1])
+    axes[0].set_ylabel("relative variation")
+    axes[0].set_title(r"Casimirs $C_k = \frac{4\pi}{N}\mathrm{Tr}((-iW)^k)$")
+    for name, series, color in (("energy $H$", energy, "C3"), ("enstrophy", enstrophy, "C2")):
+        if series is None:
+            continue
+        s = np.asarray(series, dtype=float)
+        ref = abs(s[0]) if s[0] != 0 else 1.0
+        axes[1].semilogy(t, np.maximum(np.abs(s - s[0]) / ref, floor), lw=0.8, color=color,
+                         label=name)  # fmt: skip
+    axes[1].set_ylabel("relative variation")
+    axes[1].set_xlabel("time $t$")
+    axes[1].set_title("energy and enstrophy")
+    if energy is not None or enstrophy is not None:
+        axes[1].legend(fontsize=8)
+    fig.suptitle(title or "invariants against time")
+    return fig
+
+
+def animate(
+    states: ArrayLike,
+    path: str | os.PathLike[str],
+    *,
+    ts: ArrayLike | None = None,
+    kind: str = "map",
+    center: tuple[float, float] = (30.0, 0.0),
+    fps: int = 10,
+    vmax: float | None = None,
+    title: str | None = None,
+    dpi: int = 80,
+) -> Path:
+    """Write a movie of a sequence of vorticity states.
+
+    Parameters
+    ----------
+    states : array_like, shape (n_frames, N, N) or (n_frames, n_coefficients)
+        Matrices (complex) or real coefficients.
+    path : path
+        ``.gif`` (matplotlib's Pillow writer, always available) or ``.mp4`` (needs an
+        ``ffmpeg`` executable; without one a :class:`~isoflow.ParameterError` says so).
+    ts : array_like, optional
+        Times of the frames, shown in the title.
+    kind : {"map", "orthographic"}
+    center : (latitude, longitude) in degrees, for ``kind="orthographic"``.
+    fps : int
+    vmax : float, optional
+        Colour limit (default: the largest ``|omega|`` over all frames, fixed for the movie).
+
+    Returns
+    -------
+    Path
+    """
+    from matplotlib import animation
+    from matplotlib.figure import Figure
+
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise ParameterError(f"animate: write a .gif or .mp4 file, got {p.name!r}")
+    if kind not in ("map", "orthographic"):
+        raise ParameterError(f"animate: kind must be 'map' or 'orthographic', got {kind!r}")
+    if suffix == ".mp4" and not animation.writers.is_available("ffmpeg"):
+        raise ParameterError(
+            "animate: writing .mp4 needs the ffmpeg program, which was not found; "
+            "write a .gif (Pillow) instead, or install ffmpeg"
+        )
+    c = _coefficients(states)
+    if c.ndim != 2 or c.shape[0] < 1:
+        raise ShapeError(f"animate: expected a sequence of states, got coefficients {c.shape}")
+    n = c.shape[0]
+    times = None if ts is None else np.asarray(ts, dtype=float)
+    if times is not None and times.shape != (n,):
+        raise ShapeError(f"animate: ts must have shape ({n},), got {times.shape}")
+    lmax = _lmax_of(c.shape[-1], "animate")
+    if vmax is None:
+        vmax = float(np.max(np.abs(synthesize(c, *default_grid_shape(lmax)))))
+    fig = Figure(figsize=(7.5, 4.0) if kind == "map" else (5.0, 5.0), layout="constrained")
+    ax = fig.subplots()
+    head = title or "vorticity"
+
+    def draw(k: int) -> None:
+        ax.clear()
+        if kind == "map":
+            draw_map(ax, c[k], vmax=vmax)
+        else:
+            draw_orthographic(ax, c[k], center=center, vmax=vmax)
+        ax.set_title(head + ("" if times is None else f", t = {times[k]:.4g}"))
+
+    writer: Any
+    if suffix == ".gif":
+        writer = animation.PillowWriter(fps=fps)
+    else:
+        writer = animation.FFMpegWriter(fps=fps)
+    draw(0)
+    fig.colorbar(ax.images[0], ax=ax, label=r"$\omega$", shrink=0.85)
+    with writer.saving(fig, str(p), dpi):
+        for k in range(n):
+            draw(k)
+            writer.grab_frame()
+    return p
