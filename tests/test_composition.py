@@ -14,8 +14,11 @@ from helpers import (
     initial_state,
     loglog_slope,
     random_problem,
+    run_with,
     spectrum_backward_error,
 )
+from isoflow._solve import RUN_FAILED
+from isoflow._stepping import PythonRunner
 from isoflow.io import _pack_state, _unpack_state
 from isoflow.methods.composition import SCHEMES, composition_order, full_coefficients
 from isoflow.registry import build
@@ -247,10 +250,11 @@ def test_state_is_checkpointable_bit_for_bit() -> None:
     prob = random_problem("u3", seed=2, nonlinear=True)
     W0 = initial_state(prob.algebra, 3)
     method = iso.Composition(iso.IsoMP(), "suzuki-4")
-    full = method.advance(prob, W0, 0.05, 10)
-    half = method.advance(prob, W0, 0.05, 5)
+    full = run_with(PythonRunner(prob, method, W0, 0.05), 10, 10)
+    half = run_with(PythonRunner(prob, method, W0, 0.05), 10, 10, chunks=(5,))
     state = _unpack_state(*_pack_state(half.state))
-    rest = method.advance(prob, half.y, 0.05, 5, state)
+    rest = run_with(PythonRunner(prob, method, half.y, 0.05, method_state=state, k=5), 10, 10,
+                    chunks=(5,))  # fmt: skip
     assert np.array_equal(rest.y, full.y)
 
 
@@ -277,7 +281,9 @@ def test_failing_substep_fails_the_step() -> None:
     with pytest.raises(iso.ConvergenceError, match="IsoMP o triple-jump-4"):
         iso.solve(prob, method, W0s, dt=0.1, n_steps=5)
     sol = iso.solve(prob, method, W0s, dt=0.1, n_steps=5, throw=False)
-    assert not sol.success and sol.status == -1 and "did not converge" in sol.message
+    assert not sol.success and sol.status == RUN_FAILED and "1 of 3" in sol.message
+    # the failed member is frozen at its initial state, the others take every step
+    assert list(sol.failed_step) == [-1, -1, 0] and np.array_equal(sol.ys[-1, 2], W0s[2])
     # the step record: iterations summed over substeps, the failure code of the bad member,
     # and the good members took the whole composed step
     res = method.step(prob, W0s, 0.1)

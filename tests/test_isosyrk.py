@@ -15,6 +15,7 @@ from helpers import (
     random_problem,
     spectrum_backward_error,
 )
+from isoflow._solve import RUN_FAILED
 from isoflow.algebras import Stacked
 from isoflow.methods.isosyrk import _stages_from_B, gauss_legendre
 from isoflow.registry import build
@@ -212,7 +213,7 @@ def test_non_converging_solve_fails_clearly() -> None:
         iso.solve(prob, iso.IsoSyRK(2), W0s, dt=0.1, n_steps=5)
     assert exc.value.reason in ("diverged", "max_iter", "non_finite")
     sol = iso.solve(prob, iso.IsoSyRK(2), W0s, dt=0.1, n_steps=5, throw=False)
-    assert not sol.success and sol.status == -1
+    assert not sol.success and sol.status == RUN_FAILED and list(sol.failed_step) == [-1, 0, -1]
     res = iso.IsoSyRK(2).step(prob, W0s, 0.1)
     assert list(res.status == 0) == [True, False, True]
     with pytest.raises(iso.ConvergenceError):
