@@ -387,3 +387,65 @@ def test_threaded_ensembles_equal_serial() -> None:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+COMPOSED = {
+    "rigid so(10), suzuki-4": (_rigid, iso.Composition(IsoMP(), "suzuki-4"), 0.2, 20, 2),
+    "rigid so(10), yoshida-6, X0 = W": (
+        _rigid,
+        iso.Composition(IsoMP(initial_guess="state"), "yoshida-6"),
+        0.2,
+        10,
+        1,
+    ),
+    "rigid ensemble 20, triple-jump": (
+        lambda: _rigid(members=20),
+        iso.Composition(IsoMP(), "triple-jump-4"),
+        0.1,
+        10,
+        5,
+    ),
+    "u(40) BLAS, kahan-li-6": (
+        lambda: _elementwise(iso.algebras.u(40)),
+        iso.Composition(IsoMP(), "kahan-li-6"),
+        0.1,
+        4,
+        2,
+    ),
+    "spin chain (fused), spherical suzuki-4": (
+        _chain,
+        iso.Composition(SMM(), "suzuki-4"),
+        0.1,
+        10,
+        2,
+    ),
+    "hyperbolic vortices 1, kahan-li-8": (
+        lambda: iso.models.hyperbolic_vortices(config=1),
+        iso.Composition(IsoMP(), "kahan-li-8"),
+        0.05,
+        10,
+        5,
+    ),
+    "CompiledB so(8), Anderson, suzuki-4": (
+        lambda: _user_dense(iso.algebras.so(8)),
+        iso.Composition(IsoMP(solver=A3), "suzuki-4"),
+        0.2,
+        10,
+        2,
+    ),
+}
+
+
+@pytest.mark.parametrize("name", list(COMPOSED))
+def test_compiled_compositions_equal_numpy(name: str) -> None:
+    """Each substep a compiled step of its own length with its own warm start."""
+    make, method, h, n, save_every = COMPOSED[name]
+    prob, y = make()
+    a, b = compiled_and_numpy(prob, method, y, h, n, save_every, chunks=(3, n - 3))
+    assert a.label.startswith("compiled")
+    assert_same_run(a, b, iters_exact="Anderson" not in name)
+    # the exported state (one warm start per substep position) continues the run exactly
+    longer = run_with(compiled_runner(prob, method, y, h), 2 * n, save_every)
+    again = compiled_runner(prob, method, a.y, h, method_state=a.state, k=n)
+    rest = run_with(again, 2 * n, save_every, chunks=(n,))
+    assert np.array_equal(rest.y, longer.y)

@@ -32,7 +32,8 @@ from numpy.typing import NDArray
 from .._stepping import MemberFailures, Runner
 from ..algebras import Hermitian, SL2Vectors, SpecialOrthogonal, SpinVectors, Symmetric, Unitary
 from ..kernels import ElementwiseLinear, SpinNeighbourSum
-from ..methods import IsoMP, Method, SphericalMidpoint
+from ..methods import Composition, IsoMP, Method, SphericalMidpoint
+from ..methods import composition as _composition
 from ..methods.isomp import extrapolation_weights
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
@@ -231,6 +232,8 @@ def compiled_runner(
     if kernel is None:
         return None
     base, gammas = method, (1.0,)
+    if isinstance(method, Composition):
+        base, gammas = method.base, tuple(method.coefficients)
     if not isinstance(base, (IsoMP, SphericalMidpoint)):
         return None
     if type(base.solver) is not FixedPoint:
@@ -262,6 +265,7 @@ def compiled_runner(
     return CompiledRunner(
         layout, problem, base, np.asarray(gammas, dtype=np.float64), y, h,
         method_state=method_state, k=k, failures=failures,
+        composed=isinstance(method, Composition),
     )  # fmt: skip
 
 
@@ -275,10 +279,11 @@ class CompiledRunner(Runner):
     def __init__(
         self, layout: Layout, problem: IsospectralProblem, method: Any, gammas: Array,
         y: Array, h: float, *, method_state: Any = None, k: int = 0,
-        failures: MemberFailures | None = None,
+        failures: MemberFailures | None = None, composed: bool = False,
     ) -> None:  # fmt: skip
         super().__init__()
         alg = problem.algebra
+        self.composed = composed
         self.layout = layout
         self.label = f"compiled, {layout.name}"
         self.core = alg.shape
@@ -320,35 +325,48 @@ class CompiledRunner(Runner):
         return all(p.get("num_threads", 1) <= 1 for p in threadpool_info())
 
     # ---- method state <-> ring ---------------------------------------------------------------
+    def _position_states(self, state: Any) -> list[Any]:
+        """The base method's state of every substep position (one, unless composed)."""
+        P = self.gammas.shape[0]
+        return _composition._unpack(state, P) if self.composed else [state]
+
     def _load_offsets(self, state: Any) -> None:
-        if self.kmax == 0 or state is None or len(state) < 2 or state[0] != self.h:
+        if self.kmax == 0:
             return
-        offsets = state[1 : 1 + self.kmax]
-        nh = len(offsets)
-        for q, D in enumerate(offsets):  # newest first
-            Dm = np.asarray(D).reshape(self.M, *self.core)
-            self.ring[:, 0, (nh - 1 - q)] = self.layout.to_flat(Dm)
-        self.head[:, 0] = nh - 1
-        self.nh[:, 0] = nh
+        for p, st in enumerate(self._position_states(state)):
+            hp = float(self.gammas[p]) * self.h
+            if st is None or len(st) < 2 or st[0] != hp:
+                continue
+            offsets = st[1 : 1 + self.kmax]
+            nh = len(offsets)
+            for q, D in enumerate(offsets):  # newest first
+                Dm = np.asarray(D).reshape(self.M, *self.core)
+                self.ring[:, p, (nh - 1 - q)] = self.layout.to_flat(Dm)
+            self.head[:, p] = nh - 1
+            self.nh[:, p] = nh
 
     def _export_offsets(self) -> Any:
         if self.kmax == 0:
             return None
         alive = self.failures.alive
-        nh = int(self.nh[alive, 0].max()) if alive.any() else int(self.nh[:, 0].max())
         K = self.ring.shape[2]
-        out: list[Any] = [self.h]
         idx = np.arange(self.M)
         user = self._user if self._user is not None and self._user[0] == self.k else None
-        for q in range(nh):
-            slots = (self.head[:, 0] - q) % K
-            if user is not None:
-                D = user[2][0, slots, idx]
-            else:
-                flat = self.ring[idx, 0, slots]
-                D = np.array(self.layout.offsets_from_flat(flat), copy=True)
-            out.append(D[0] if self.batch == () else D)  # members flattened, as PythonRunner
-        return tuple(out) if nh else None
+        states: list[Any] = []
+        for p in range(self.gammas.shape[0]):
+            nh_p = self.nh[alive, p] if alive.any() else self.nh[:, p]
+            nh = int(nh_p.max())
+            out: list[Any] = [float(self.gammas[p]) * self.h]
+            for q in range(nh):
+                slots = (self.head[:, p] - q) % K
+                if user is not None:
+                    D = user[2][p, slots, idx]
+                else:
+                    flat = self.ring[idx, p, slots]
+                    D = np.array(self.layout.offsets_from_flat(flat), copy=True)
+                out.append(D[0] if self.batch == () else D)  # members flattened, as PythonRunner
+            states.append(tuple(out) if nh else None)
+        return _composition._pack(states) if self.composed else states[0]
 
     def state(self) -> tuple[Array, Any]:
         if self._user is not None and self._user[0] == self.k:
