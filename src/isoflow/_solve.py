@@ -16,6 +16,7 @@ uninterrupted run bit for bit.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import signal
@@ -652,6 +653,79 @@ def _failure_message(method: Method, fails: MemberFailures, batch: tuple[int, ..
     )
 
 
+class _Sink:
+    """The writer's side of the loop: diagnostics of the saved rows, appends, checkpoints and
+    the final close, in the order they are given.
+
+    With ``background=True`` they run in one worker thread, overlapping with the next chunk
+    (the compiled drivers release the GIL; NumPy's eigenvalue routines and h5py's writes do
+    too), so saving every step costs little more than stepping on a machine with a core to
+    spare. Work is queued at most two items deep; an error in the worker is raised in the
+    loop at its next call (an ``OSError`` as :class:`ResultWriteError`).
+    """
+
+    def __init__(
+        self, writer: StreamWriter, accumulator: DiagnosticsAccumulator, series: bool,
+        background: bool,
+    ) -> None:  # fmt: skip
+        self.writer = writer
+        self.accumulator = accumulator
+        self.series = series
+        self.pool: Any = None
+        self.pending: list[Any] = []
+        if background:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="isoflow-writer")
+
+    def _do(self, fn: Any, *args: Any) -> None:
+        if self.pool is None:
+            fn(*args)
+            return
+        self.pending.append(self.pool.submit(fn, *args))
+        while len(self.pending) > 2:
+            self.pending.pop(0).result()
+
+    def _rows(self, ts: Array, ys: Array) -> None:
+        series = self.accumulator.update(ts, ys) if self.series else {}
+        try:
+            self.writer.append(ts, ys, series)
+        except OSError as exc:
+            raise ResultWriteError(f"writing the saved states failed: {exc}") from exc
+
+    def _checkpoint(self, k: int, y: Array, st: Any, fails: MemberFailures | None) -> None:
+        try:
+            self.writer.checkpoint(k, y, st, fails)
+        except OSError as exc:
+            raise ResultWriteError(f"writing a checkpoint failed: {exc}") from exc
+
+    def rows(self, ts: Array, ys: Array) -> None:
+        """Saved states (owned by the sink from now on) and their diagnostics."""
+        self._do(self._rows, ts, ys)
+
+    def checkpoint(self, k: int, y: Array, st: Any, fails: MemberFailures | None) -> None:
+        """A checkpoint (``y``, ``st`` and ``fails`` must not change afterwards: copies)."""
+        self._do(self._checkpoint, k, y, st, fails)
+
+    def wait(self) -> None:
+        """Everything handed over is done (raises the first error of the worker)."""
+        pending, self.pending = self.pending, []
+        for f in pending:
+            f.result()
+
+    def shutdown(self) -> None:
+        """Wait for the worker without raising (after another error)."""
+        for f in self.pending:
+            try:
+                f.result()
+            except BaseException:  # the error that stopped the run matters more
+                pass
+        self.pending = []
+        if self.pool is not None:
+            self.pool.shutdown(wait=True)
+            self.pool = None
+
+
 def _run(
     problem: IsospectralProblem,
     method: Method,
@@ -684,21 +758,19 @@ def _run(
     runner = _runner_for(problem, method, state, dt)
     k0 = runner.k
     start = time.perf_counter()
+    compute_series = diagnostics or not memory
+    sink = _Sink(
+        out_writer, accumulator, compute_series,
+        background=compute_series and not getattr(runner, "parallel", False),
+    )  # fmt: skip
 
     def emit(ts: Array, ys: Array) -> None:
-        series = accumulator.update(ts, ys) if diagnostics or not memory else {}
-        try:
-            out_writer.append(ts, ys, series)
-        except OSError as exc:
-            raise ResultWriteError(f"writing the saved states failed: {exc}") from exc
+        sink.rows(ts, ys)
 
     def checkpoint() -> None:
         y, st = runner.state()
-        fails = runner.failures if runner.failures.failed.size else None
-        try:
-            out_writer.checkpoint(runner.k, y.reshape(W.shape), st, fails)
-        except OSError as exc:
-            raise ResultWriteError(f"writing a checkpoint failed: {exc}") from exc
+        fails = copy.deepcopy(runner.failures) if runner.failures.failed.size else None
+        sink.checkpoint(runner.k, np.array(y, copy=True).reshape(W.shape), st, fails)
 
     status, message = RUN_FINISHED, f"{n} steps of dt = {dt:g} completed"
     W_first = np.array(W, copy=True)
@@ -720,7 +792,7 @@ def _run(
             )
         except OSError as exc:
             raise ResultWriteError(f"creating the result file failed: {exc}") from exc
-        emit(np.array([t0]), W[None])
+        emit(np.array([t0]), W[None].copy())
         if not memory:
             checkpoint()
     bar = tqdm(
@@ -790,20 +862,26 @@ def _run(
             with _deferred_sigint():
                 if runner.k > k0 and runner.k % save_every:
                     y, _ = runner.state()
-                    emit(np.array([t0 + runner.k * dt]), y.reshape(1, *W.shape))
+                    emit(np.array([t0 + runner.k * dt]), np.array(y).reshape(1, *W.shape))
                     if not memory:
                         checkpoint()
+        with _deferred_sigint():
+            sink.wait()
     except BaseException as exc:
         status = RUN_INTERRUPTED
         message = f"interrupted: {type(exc).__name__}: {exc}"
+        sink.shutdown()
         if not memory and not isinstance(exc, ResultWriteError):
             try:  # the state is consistent between chunks: keep it
-                checkpoint()
+                y, st = runner.state()
+                fails = runner.failures if runner.failures.failed.size else None
+                sink._checkpoint(runner.k, y.reshape(W.shape), st, fails)
             except Exception:  # pragma: no cover - the original error matters more
                 pass
         raise
     finally:
         bar.close()
+        sink.shutdown()
         wall = time.perf_counter() - start
         stats = _stats(runner, k0, wall)
         try:

@@ -259,8 +259,8 @@ def drive_blocks_parallel(  # type: ignore[no-untyped-def]
 
 
 # Separate functions on purpose (numba's cache key ignores ``parallel=``; see driver.py).
-drive_blocks_serial = numba.njit(cache=True)(drive_blocks_serial)
-drive_blocks_parallel = numba.njit(cache=True, parallel=True)(drive_blocks_parallel)
+drive_blocks_serial = numba.njit(cache=True, nogil=True)(drive_blocks_serial)
+drive_blocks_parallel = numba.njit(cache=True, parallel=True, nogil=True)(drive_blocks_parallel)
 
 
 def to_blocks(A: np.ndarray, nb: int) -> np.ndarray:

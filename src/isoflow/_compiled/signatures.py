@@ -82,5 +82,5 @@ def compiled_driver(signature: Any, parallel: bool) -> Any:
     d = _DRIVERS.get(key)
     if d is None:
         py = driver.drive_parallel if parallel else driver.drive_serial
-        d = _DRIVERS[key] = numba.njit(signature, cache=True, parallel=parallel)(py)
+        d = _DRIVERS[key] = numba.njit(signature, cache=True, parallel=parallel, nogil=True)(py)
     return d
