@@ -1,29 +1,42 @@
-"""The physical systems of the paper, each a function returning ``(problem, initial_state)``."""
+"""The physical systems, each a function returning ``(problem, initial_state)``.
+
+The model modules are imported on first use (``iso.models.rigid_body`` imports only
+``rigid_body.py``), so that a model whose kernel is compiled code loads numba only when used.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from .._errors import ParameterError as ParameterError
-from .brockett import brockett as brockett
-from .euler_sphere import coriolis_matrix as coriolis_matrix
-from .euler_sphere import euler_sphere as euler_sphere
-from .heisenberg_chain import heisenberg_chain as heisenberg_chain
-from .hyperbolic_vortices import hyperbolic_vortices as hyperbolic_vortices
-from .rigid_body import rigid_body as rigid_body
-from .sphere_vortices import sphere_vortices as sphere_vortices
-from .toda import jacobi_coefficients as jacobi_coefficients
-from .toda import jacobi_matrix as jacobi_matrix
-from .toda import off_band as off_band
-from .toda import toda as toda
 
-__all__: list[str] = [
-    "ParameterError",
-    "brockett",
-    "coriolis_matrix",
-    "euler_sphere",
-    "heisenberg_chain",
-    "hyperbolic_vortices",
-    "jacobi_coefficients",
-    "jacobi_matrix",
-    "off_band",
-    "rigid_body",
-    "sphere_vortices",
-    "toda",
-]
+#: public name -> module that defines it
+_WHERE = {
+    "brockett": "brockett",
+    "coriolis_matrix": "euler_sphere",
+    "euler_sphere": "euler_sphere",
+    "heisenberg_chain": "heisenberg_chain",
+    "hyperbolic_vortices": "hyperbolic_vortices",
+    "jacobi_coefficients": "toda",
+    "jacobi_matrix": "toda",
+    "off_band": "toda",
+    "rigid_body": "rigid_body",
+    "sphere_vortices": "sphere_vortices",
+    "spin_lattice": "spin_lattice",
+    "toda": "toda",
+}
+
+__all__ = ["ParameterError", *sorted(_WHERE)]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
