@@ -29,6 +29,13 @@ ALGEBRA_FACTORIES: dict[str, Callable[[], Algebra]] = {
 #: Spaces that are their own normalizer (Lie algebras closed under the conjugate transpose).
 LIE_KEYS = ("so4", "u3", "su3", "sp4", "sl2", "glR3", "glC3")
 
+#: Every space of the conformance suite: the matrix algebras and the compact vector forms.
+SPACES: dict[str, Callable[[], Algebra]] = {
+    **ALGEBRA_FACTORIES,
+    "so3-vectors": lambda: iso.algebras.so3_vectors(3),
+    "sl2-vectors": lambda: iso.algebras.sl2_vectors(2),
+}
+
 
 def loglog_slope(hs: Array, errors: Array) -> float:
     """Least-squares slope of ``log(error)`` against ``log(h)``."""
@@ -96,6 +103,22 @@ def random_problem(key: str, seed: int = 0, nonlinear: bool = False) -> iso.Isos
     if key in LIE_KEYS:
         return hamiltonian_problem(alg, seed, nonlinear)
     return generic_problem(alg, seed, nonlinear)
+
+
+def space_problem(key: str, seed: int = 0) -> iso.IsospectralProblem:
+    """A nonlinear problem on any space of :data:`SPACES`: Lie–Poisson on the Lie algebras and
+    the vector forms, a generic ``B`` on sym(n) / herm(n)."""
+    if key in ALGEBRA_FACTORIES:
+        return random_problem(key, seed, nonlinear=True)
+    return hamiltonian_problem(SPACES[key](), seed, nonlinear=True)
+
+
+def space_state(alg: Algebra, seed: int, norm: float = 0.8) -> Array:
+    """A seeded element of norm ``norm`` (for the vector forms: ``norm`` per particle)."""
+    W = alg.random(seed)
+    if alg.shape[-1] == 3 and not isinstance(alg, iso.algebras.MatrixAlgebra):
+        return W * (norm / np.linalg.norm(W, axis=-1, keepdims=True))
+    return W * (norm / float(alg.norm(W)))
 
 
 def initial_state(alg: Algebra, seed: int, norm: float = 0.8) -> Array:

@@ -641,7 +641,8 @@ def _failure_message(method: Method, fails: MemberFailures, batch: tuple[int, ..
             "below 2) or change the solver."
         )
     shown = ", ".join(
-        f"{np.unravel_index(int(m), batch)} at step {int(fails.step[m])} ({fails.reason(int(m))})"
+        f"{tuple(int(i) for i in np.unravel_index(int(m), batch))} at step "
+        f"{int(fails.step[m])} ({fails.reason(int(m))})"
         for m in idx[:5]
     )
     more = f" and {idx.size - 5} more" if idx.size > 5 else ""

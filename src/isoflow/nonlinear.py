@@ -223,7 +223,15 @@ class NonlinearSolver:
         return 1
 
     def solve(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
-        """Solve ``X = G(X)`` starting from ``X0`` (not modified)."""
+        """Solve ``X = G(X)`` starting from ``X0`` (not modified).
+
+        Overflow and NaN in a diverging member are reported by its status, not as NumPy
+        warnings.
+        """
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._solve(prob, X0)
+
+    def _solve(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
         alg = prob.algebra
         batch = alg.batch_shape(X0)
         if batch == ():
@@ -303,7 +311,7 @@ class NonlinearSolver:
         mixer = _Anderson(self.anderson, 1) if self.anderson > 0 else None
         for it in range(1, self.max_iter + 1):
             GX, aux = prob.G(X, None)
-            r = float(np.linalg.norm((GX - X).ravel()))
+            r = float(prob.algebra.norm(GX - X))  # as for ensembles: the same decisions
             code, prev, first = stopping_step(
                 r, prev, first, it, tol, floor, self.divergence_factor
             )

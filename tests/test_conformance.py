@@ -1,0 +1,157 @@
+"""The conformance suite: every method on every space it applies to, the same properties.
+
+A method joins by being listed once in :data:`METHODS`, a space in
+:data:`helpers.SPACES`. Each pair is checked for the observed order (log-log fit against
+DOP853), symmetry (``step(-h) o step(h) = id`` for symmetric methods), structure (the state
+stays in ``V``; isospectral methods keep the Casimirs to rounding), ensembles (equal to separate
+runs), failure behaviour (a hopeless step fails with a typed error; in an ensemble only that
+member is frozen) and the checkpoint round trip (a run continued from its packed method state
+is the uninterrupted run, bit for bit). Method-specific properties live in their own files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+from helpers import SPACES, loglog_slope, run_with, space_problem, space_state
+from isoflow._stepping import PythonRunner
+from isoflow.io import _pack_state, _unpack_state
+
+
+@dataclass(frozen=True)
+class MethodCase:
+    """A method and what it promises."""
+
+    make: Callable[[], iso.Method]
+    isospectral: bool
+    spaces: tuple[str, ...] | None = None  # None: every space
+    order_spaces: tuple[str, ...] = ("so4", "herm3")
+    #: whether a far too large step makes its solve fail (Newton may find a root off the
+    #: consistent branch there instead; see the Newton docstring)
+    fails_on_huge_steps: bool = True
+
+
+VECTOR = ("so3-vectors",)
+METHODS: dict[str, MethodCase] = {
+    "IsoMP": MethodCase(iso.IsoMP, True, order_spaces=("so4", "herm3", "sl2-vectors")),
+    "IsoMP, X0 = W": MethodCase(lambda: iso.IsoMP(initial_guess="state"), True),
+    "IsoMP, Anderson": MethodCase(lambda: iso.IsoMP(solver=iso.FixedPoint(anderson=3)), True),
+    "IsoMP, Newton": MethodCase(
+        lambda: iso.IsoMP(solver=iso.Newton()), True, fails_on_huge_steps=False
+    ),
+    "classical midpoint": MethodCase(iso.ClassicalMidpoint, False),
+    "RK4": MethodCase(iso.RK4, False),
+    "spherical midpoint": MethodCase(iso.SphericalMidpoint, True, VECTOR, VECTOR),
+    "IsoMP o suzuki-4": MethodCase(lambda: iso.Composition(iso.IsoMP(), "suzuki-4"), True),
+    "spherical o triple-jump-4": MethodCase(
+        lambda: iso.Composition(iso.SphericalMidpoint(), "triple-jump-4"), True, VECTOR, VECTOR
+    ),
+    "IsoSyRK(2)": MethodCase(lambda: iso.IsoSyRK(2), True),
+}
+
+PAIRS = [
+    (m, s) for m, case in METHODS.items() for s in SPACES if case.spaces is None or s in case.spaces
+]
+ORDER_PAIRS = [(m, s) for m, case in METHODS.items() for s in case.order_spaces]
+
+
+def _ids(pairs: list[tuple[str, str]]) -> list[str]:
+    return [f"{m} on {s}" for m, s in pairs]
+
+
+@pytest.mark.parametrize(("name", "space"), ORDER_PAIRS, ids=_ids(ORDER_PAIRS))
+def test_observed_order(name: str, space: str) -> None:
+    method = METHODS[name].make()
+    prob = space_problem(space, seed=3)
+    W0 = space_state(prob.algebra, 1, norm=0.7)
+    T = 1.0
+    ref = iso.reference_solution(prob, W0, [T])[0]
+    hs = np.array([0.2, 0.1, 0.05])
+    errs = []
+    for h in hs:
+        sol = iso.solve(prob, method, W0, dt=float(h), t1=T, save_every=1000)
+        errs.append(float(np.max(np.abs(sol.ys[-1] - ref))))
+    assert min(errs) > 1e-11  # above the reference's error: the fit measures the method
+    assert loglog_slope(hs, np.array(errs)) == pytest.approx(method.order, abs=0.25)
+
+
+@pytest.mark.parametrize(("name", "space"), PAIRS, ids=_ids(PAIRS))
+def test_symmetric_methods_step_back(name: str, space: str) -> None:
+    method = METHODS[name].make()
+    if not method.symmetric:
+        pytest.skip(f"{method.name} is not symmetric")
+    prob = space_problem(space, seed=5)
+    W0 = space_state(prob.algebra, 2)
+    W1 = iso.step(prob, method, W0, 0.1)
+    assert float(np.max(np.abs(W1 - W0))) > 1e-3  # a real step
+    assert float(np.max(np.abs(iso.step(prob, method, W1, -0.1) - W0))) <= 1e-13
+
+
+@pytest.mark.parametrize(("name", "space"), PAIRS, ids=_ids(PAIRS))
+def test_structure(name: str, space: str) -> None:
+    """In ``V`` to rounding; Casimirs to rounding for the isospectral methods."""
+    case = METHODS[name]
+    prob = space_problem(space, seed=7)
+    W0 = space_state(prob.algebra, 3)
+    sol = iso.solve(prob, case.make(), W0, dt=0.05, n_steps=200, save_every=20)
+    d = sol.diagnostics
+    assert sol.success and float(np.max(d.max_distance)) <= 1e-13
+    assert float(np.max(np.abs(sol.ys[-1] - W0))) > 1e-2  # the flow moved
+    if case.isospectral:
+        assert float(np.max(d.casimir_drift)) <= 1e-12
+
+
+@pytest.mark.parametrize(("name", "space"), PAIRS, ids=_ids(PAIRS))
+def test_ensemble_equals_separate_runs(name: str, space: str) -> None:
+    method = METHODS[name].make()
+    """A ``(2, 2)`` ensemble whose members converge at different speeds."""
+    prob = space_problem(space, seed=9)
+    Ws = np.stack([space_state(prob.algebra, s, norm=0.3 + 0.1 * s) for s in range(4)])
+    Ws = Ws.reshape(2, 2, *prob.algebra.shape)
+    ens = iso.solve(prob, method, Ws, dt=0.1, n_steps=15, save_every=5)
+    assert ens.ys.shape == (4, 2, 2, *prob.algebra.shape)
+    assert ens.diagnostics.casimir_drift.shape == (2, 2)
+    for i in range(2):
+        for j in range(2):
+            one = iso.solve(prob, method, Ws[i, j], dt=0.1, n_steps=15, save_every=5)
+            scale = float(np.max(np.abs(one.ys)))
+            assert float(np.max(np.abs(ens.ys[:, i, j] - one.ys))) <= 1e-13 * scale
+
+
+@pytest.mark.parametrize(("name", "space"), PAIRS, ids=_ids(PAIRS))
+def test_hopeless_step_fails_clearly_and_freezes_only_that_member(name: str, space: str) -> None:
+    method = METHODS[name].make()
+    if not method.implicit:
+        pytest.skip(f"{method.name} is explicit: no nonlinear solve to fail")
+    if not METHODS[name].fails_on_huge_steps:
+        pytest.skip(f"{method.name} finds a root off the consistent branch at huge steps")
+    prob = space_problem(space, seed=11)
+    good = space_state(prob.algebra, 4, norm=0.5)
+    bad = space_state(prob.algebra, 5, norm=60.0)
+    with pytest.raises((iso.ConvergenceError, iso.NonFiniteError)):
+        iso.solve(prob, method, bad, dt=0.5, n_steps=3)
+    sol = iso.solve(prob, method, np.stack([good, bad, good]), dt=0.05, n_steps=6, throw=False)
+    assert not sol.success and sol.status == 1
+    assert list(sol.failed_step) == [-1, 0, -1] and list(sol.failure_reasons) == [(1,)]
+    assert np.array_equal(sol.ys[-1, 1], bad)  # frozen at its last good state
+    alone = iso.solve(prob, method, good, dt=0.05, n_steps=6)
+    assert float(np.max(np.abs(sol.ys[-1, 0] - alone.ys[-1]))) <= 1e-13
+
+
+@pytest.mark.parametrize(("name", "space"), PAIRS, ids=_ids(PAIRS))
+def test_checkpoint_round_trip_is_bit_for_bit(name: str, space: str) -> None:
+    method = METHODS[name].make()
+    prob = space_problem(space, seed=13)
+    W0 = space_state(prob.algebra, 6)
+    h = 0.05
+    whole = run_with(PythonRunner(prob, method, W0, h), 12, 12)
+    part = run_with(PythonRunner(prob, method, W0, h), 12, 12, chunks=(5,))
+    state = _unpack_state(*_pack_state(part.state))
+    rest = run_with(PythonRunner(prob, method, part.y, h, method_state=state, k=5), 12, 12,
+                    chunks=(7,))  # fmt: skip
+    assert np.array_equal(rest.y, whole.y)
