@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -167,3 +169,74 @@ def test_all_errors_share_the_base_class() -> None:
         iso.ConvergenceError,
     ):
         assert issubclass(cls, iso.IsoflowError)
+
+
+def _changing_B(after: int, change):
+    """A ``B`` that behaves (``-W``) for ``after`` calls and then returns ``change(W)``."""
+    calls = {"n": 0}
+
+    def B(W):
+        calls["n"] += 1
+        return -D3 * W if calls["n"] <= after else change(W)
+
+    return B
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda W: -W + 1e-3j, "complex values"),
+        (lambda W: -W[..., :2, :], "returned shape"),
+        (lambda W: np.array("text"), "returned shape|non-numeric"),
+    ],
+    ids=["turns complex", "changes shape", "returns text"],
+)
+def test_B_that_changes_mid_run_stops_the_run_clearly(W0, change, match) -> None:
+    """Mid-run: a clear typed error with throw=True; with throw=False the run so far is kept
+    and the message names the problem (never a silent wrong answer)."""
+    alg = iso.algebras.so(3)
+    prob = iso.IsospectralProblem(B=_changing_B(40, change), algebra=alg)
+    with pytest.raises(iso.IsoflowError, match=match):
+        iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=50)
+    prob = iso.IsospectralProblem(B=_changing_B(40, change), algebra=alg)
+    sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=50, throw=False)
+    assert not sol.success and re.search(match, sol.message)
+    assert 0 < sol.stats.n_steps < 50 and np.all(np.isfinite(sol.ys))
+    assert sol.ts[-1] == pytest.approx(sol.stats.n_steps * 0.1)  # the last good state is kept
+
+
+def test_B_that_raises_mid_run_keeps_the_run_so_far(W0) -> None:
+    def boom(W):
+        raise RuntimeError("the model broke")
+
+    prob = iso.IsospectralProblem(B=_changing_B(30, boom), algebra=iso.algebras.so(3))
+    sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=50, throw=False)
+    assert not sol.success and "the model broke" in sol.message
+    assert 0 < sol.stats.n_steps < 50
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"problem": None}, TypeError, "IsospectralProblem"),
+        ({"method": iso.IsoMP}, TypeError, r"iso.IsoMP\(\), not"),
+        ({"method": "isomp"}, TypeError, "isoflow method"),
+        ({"writer": "file.h5"}, TypeError, "HDF5Writer"),
+        ({"y0": np.zeros((0, 3, 3))}, iso.ShapeError, "empty ensemble"),
+        ({"save_every": 0}, iso.ParameterError, "save_every"),
+        ({"save_every": 2.5}, iso.ParameterError, "save_every"),
+    ],
+)
+def test_wrong_kinds_of_argument_get_typed_errors(so3_problem, W0, kwargs, error, match) -> None:
+    args = {"problem": so3_problem, "method": iso.IsoMP(), "y0": W0, **kwargs}
+    rest = {k: v for k, v in kwargs.items() if k not in ("problem", "method", "y0")}
+    with pytest.raises(error, match=match):
+        iso.solve(args["problem"], args["method"], args["y0"], dt=0.1, n_steps=2, **rest)
+
+
+def test_hamiltonian_returning_nonsense_is_named(W0) -> None:
+    prob = iso.IsospectralProblem(
+        B=lambda W: -W, algebra=iso.algebras.so(3), hamiltonian=lambda W: "energy"
+    )
+    with pytest.raises(iso.InvalidBError, match="hamiltonian returned non-numeric"):
+        iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=2)

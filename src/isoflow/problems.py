@@ -91,13 +91,38 @@ class IsospectralProblem:
 
     # ---- evaluation ---------------------------------------------------------------------
     def evaluate_B(self, W: Array) -> Array:
-        """``B(W)`` honouring :attr:`vectorized`."""
+        """``B(W)`` honouring :attr:`vectorized`, checked on every call.
+
+        Raises
+        ------
+        InvalidBError
+            ``B`` returned the wrong shape, a non-numeric array, or complex values for a real
+            normalizer (cheap checks, so that a ``B`` that changes its output in the middle of
+            a run stops it with a clear message instead of a wrong answer).
+        """
+        alg = self.algebra
         if self.vectorized:
-            return np.asarray(self.B(W))
-        batch = self.algebra.batch_shape(W)
-        flat = W.reshape(-1, *self.algebra.shape)
-        out = np.stack([np.asarray(self.B(w)) for w in flat])
-        return out.reshape(*batch, *out.shape[1:])
+            out = np.asarray(self.B(W))
+        else:
+            batch = alg.batch_shape(W)
+            flat = W.reshape(-1, *alg.shape)
+            out = np.stack([np.asarray(self.B(w)) for w in flat])
+            out = out.reshape(*batch, *out.shape[1:])
+        norm_alg = alg.normalizer
+        expected = (*alg.batch_shape(W), *norm_alg.shape)
+        if out.shape != expected:
+            raise InvalidBError(
+                f"B returned shape {out.shape}, expected {expected} (values in "
+                f"{norm_alg.name}; B must broadcast over leading batch axes)"
+            )
+        if out.dtype.kind not in "iufc":
+            raise InvalidBError(f"B returned non-numeric dtype {out.dtype}")
+        if out.dtype.kind == "c" and not norm_alg.is_complex:
+            raise InvalidBError(
+                f"B returned complex values but its values must lie in the real algebra "
+                f"{norm_alg.name}"
+            )
+        return out
 
     def evaluate_B_jvp(self, W: Array, dW: Array) -> Array:
         """``DB(W)[dW]`` honouring :attr:`vectorized` (requires :attr:`B_jvp`)."""
@@ -131,20 +156,6 @@ class IsospectralProblem:
             raise
         except Exception as exc:  # re-raise user errors with context, keep the cause
             raise InvalidBError(f"B raised {type(exc).__name__}: {exc}") from exc
-        batch = alg.batch_shape(W)
-        expected = (*batch, *norm_alg.shape)
-        if out.shape != expected:
-            raise InvalidBError(
-                f"B returned shape {out.shape}, expected {expected} (values in "
-                f"{norm_alg.name}; B must broadcast over leading batch axes)"
-            )
-        if out.dtype.kind not in "iufc":
-            raise InvalidBError(f"B returned non-numeric dtype {out.dtype}")
-        if out.dtype.kind == "c" and not norm_alg.is_complex:
-            raise InvalidBError(
-                f"B returned complex values but its values must lie in the real algebra "
-                f"{norm_alg.name}"
-            )
         if not np.all(np.isfinite(out)):
             raise InvalidBError("B returned non-finite values (NaN or Inf)")
         outc = out.astype(norm_alg.dtype, copy=False)
