@@ -73,6 +73,10 @@ RUN_INTERRUPTED = 2
 CHUNK_SECONDS = 0.5
 #: Largest row buffer of one chunk, in bytes (larger states save fewer rows per chunk).
 CHUNK_BYTES = 64 * 2**20
+#: Target wall time of a chunk when the saved rows are processed by the writer thread (a
+#: pipeline: the diagnostics of one chunk overlap the stepping of the next). Long against
+#: the interpreter's thread switch interval (5 ms), short against :data:`CHUNK_SECONDS`.
+PIPELINE_SECONDS = 0.05
 
 
 @dataclass(frozen=True)
@@ -522,21 +526,35 @@ def continue_run(
 
 
 class _MemoryWriter:
-    """The in-memory "stream" of :func:`solve` without a writer: keeps every saved state."""
+    """The in-memory "stream" of :func:`solve` without a writer: keeps every saved state.
+
+    The rows are preallocated (the loop knows how many states it saves) and the compiled
+    runner writes its saved states straight into them (:meth:`rows`), so memory holds the saved
+    states once, not also in chunk buffers or a final concatenation.
+    """
 
     chunk_rows = 2**62
     flush_seconds = math.inf
 
-    def __init__(self) -> None:
-        self._ts: list[Array] = []
-        self._ys: list[Array] = []
+    def __init__(self, total: int, shape: tuple[int, ...], dtype: Any) -> None:
+        self._ts = np.empty(total)
+        self._ys = np.empty((total, *shape), dtype=dtype)
+        self._n = 0
+
+    def rows(self, count: int) -> Array:
+        """A view of the next ``count`` rows (``count`` at most the rows left)."""
+        return self._ys[self._n : self._n + count]
 
     def open(self, meta: dict[str, Any]) -> None:
         """Nothing to prepare."""
 
     def append(self, ts: Array, ys: Array, series: dict[str, Array]) -> None:
-        self._ts.append(ts)
-        self._ys.append(ys)
+        m = len(ts)
+        dst = self._ys[self._n : self._n + m]
+        if not np.shares_memory(dst, ys):  # rows written in place need no copy
+            dst[...] = ys
+        self._ts[self._n : self._n + m] = ts
+        self._n += m
 
     def checkpoint(self, step: int, y: Array, method_state: Any, failures: Any) -> None:
         """In memory there is nothing to make durable."""
@@ -546,7 +564,7 @@ class _MemoryWriter:
 
     def arrays(self) -> tuple[Array, Array]:
         """All saved times and states, time first."""
-        return np.concatenate(self._ts), np.concatenate(self._ys)
+        return self._ts[: self._n], self._ys[: self._n]
 
 
 @contextmanager
@@ -752,7 +770,11 @@ def _run(
     batch = alg.batch_shape(W)
     M = int(np.prod(batch, dtype=np.int64))
     memory = writer is None
-    out_writer: StreamWriter = _MemoryWriter() if writer is None else writer
+    if writer is None:
+        total = (1 if fresh else 0) + _save_steps(state.step, n, save_every, n)
+        out_writer: StreamWriter = _MemoryWriter(total + 1, W.shape, alg.dtype)
+    else:
+        out_writer = writer
     if accumulator is None:
         accumulator = DiagnosticsAccumulator(problem, keep_series=memory)
         accumulator.set_first_state(W)
@@ -802,6 +824,9 @@ def _run(
     )  # fmt: skip
     row_bytes = max(W.nbytes, 1)
     max_rows = int(max(1, min(out_writer.chunk_rows, CHUNK_BYTES // row_bytes)))
+    chunk_seconds = CHUNK_SECONDS
+    if sink.pool is not None:  # shorter chunks keep the writer thread busy alongside
+        chunk_seconds = PIPELINE_SECONDS
     last_checkpoint = time.monotonic()
     rows_since = 0
     per_step: float | None = None
@@ -815,13 +840,17 @@ def _run(
                 k_before = runner.k
                 nsteps = min(n - k_before, _steps_for_rows(k_before, max_rows, save_every, n))
                 if per_step is not None:
-                    nsteps = min(nsteps, max(1, int(CHUNK_SECONDS / max(per_step, 1e-12))))
+                    nsteps = min(nsteps, max(1, int(chunk_seconds / max(per_step, 1e-12))))
                 else:
                     nsteps = min(nsteps, nsteps_next)
                 if getattr(runner, "checkpoints_at_saves", False):
                     nsteps = _end_at_save(k_before, nsteps, save_every, n)
                 rows = _save_steps(k_before, k_before + nsteps, save_every, n)
-                out = np.empty((rows, M, *alg.shape), dtype=alg.dtype)
+                if memory and not sink.pending:  # straight into the result (none queued)
+                    assert isinstance(out_writer, _MemoryWriter)
+                    out = out_writer.rows(rows).reshape(rows, M, *alg.shape)
+                else:
+                    out = np.empty((rows, M, *alg.shape), dtype=alg.dtype)
                 t_call = time.perf_counter()
                 runner.advance(nsteps, save_every, n, out)
                 elapsed = time.perf_counter() - t_call

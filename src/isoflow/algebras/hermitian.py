@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._eig import eigvalsh
 from ._base import MatrixAlgebra
 from .unitary import Unitary
 
@@ -31,7 +32,7 @@ class Hermitian(MatrixAlgebra):
         return np.conj(np.swapaxes(Y, -1, -2))
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
-        return np.linalg.eigvalsh(W)
+        return eigvalsh(W)
 
 
 def herm(n: int) -> Hermitian:

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._eig import eigvalsh
 from ._base import MatrixAlgebra
 from .orthogonal import SpecialOrthogonal
 
@@ -31,7 +32,7 @@ class Symmetric(MatrixAlgebra):
         return np.swapaxes(Y, -1, -2)
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
-        return np.linalg.eigvalsh(W)
+        return eigvalsh(W)
 
 
 def sym(n: int) -> Symmetric:
