@@ -37,8 +37,10 @@ def eigvalsh(A: Any) -> NDArray[np.float64]:
     if flat.dtype.kind not in "fc":
         flat = flat.astype(np.float64)
     out = np.empty(flat.shape[:2], dtype=np.float64)
-    if flat.shape[0] >= PARALLEL_MIN and numba.get_num_threads() > 1 and (
-        threading.current_thread() is threading.main_thread()
+    if (
+        flat.shape[0] >= PARALLEL_MIN
+        and numba.get_num_threads() > 1
+        and (threading.current_thread() is threading.main_thread())
     ):
         eigvalsh_stack_parallel(flat, out)
     elif flat.shape[0]:
