@@ -1,0 +1,312 @@
+"""Benchmarks 8-13: the compiled-driver redesign (issue 10) and Euler on the sphere (issue 12).
+
+Each function takes ``quick`` and returns a list of result records (``id``, ``name``,
+``metric``, ``value``, ``target``, ``met`` and the measured times), like benchmarks 1-7. Every
+ratio pairs two measurements taken alternately in the same process (best of the repeats: other
+load on a shared machine only ever adds time).
+
+8.  so(10) rigid body through ``CompiledB``: per step against the built-in kernel (at most
+    1.2x) and against the same ``B`` as a Python function (at least 15x faster).
+9.  Saving: ``save_every=1`` against ``save_every=100`` on the compiled so(10) path with
+    diagnostics on (at most 1.5x per step); an ensemble of 10^4 so(10) with ``save_every=10``
+    against saving only the end (at most 1.5x per system-step), with the peak memory against
+    the saved bytes.
+10. Single so(n) and u(n), n = 32, 64, 96: time per iteration against the bare time of two
+    products of that size plus one evaluation of ``B`` (at most 1.5x).
+11. Ensembles of 1000 so(64): per system-step against the NumPy path (stacked matmul): at
+    least 2x faster.
+12. Euler on the sphere, N = 256, 512, 1024: time per fixed-point iteration against two complex
+    products plus one Poisson solve (at most 1.15x).
+13. Iterations per step, Euler on the sphere (random smooth vorticity, ``h ||B||_2 = 0.3``,
+    ``rtol = 1e-14``): IsoMP's default start and Anderson mixing against the start ``X = W``
+    (target at most 10), and on the paper's rigid body.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numba
+import numpy as np
+
+import isoflow as iso
+from isoflow._compiled import compiled_runner
+from isoflow._stepping import PythonRunner
+
+__all__ = ["BENCHMARKS"]
+
+
+def _paired(fa: Callable[[], Any], fb: Callable[[], Any], repeats: int = 5) -> tuple[float, float]:
+    """Best times of ``fa()`` and ``fb()``, timed alternately after one warm-up each."""
+    fa()
+    fb()
+    ta, tb = [], []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fa()
+        ta.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        fb()
+        tb.append(time.perf_counter() - t)
+    return min(ta), min(tb)
+
+
+def _two_products(evaluate_B: Callable[[Any, Any], None], X: Any, reps: int) -> Callable[[], None]:
+    """``reps`` times: ``B = B(X)`` into a buffer, ``P = B X``, ``T = P B`` (NumPy, BLAS):
+    the bare work of one IsoMP iteration."""
+    B, P, T = (np.empty_like(X) for _ in range(3))
+
+    def go() -> None:
+        for _ in range(reps):
+            evaluate_B(X, B)
+            np.matmul(B, X, out=P)
+            np.matmul(P, B, out=T)
+
+    return go
+
+
+def _runner_steps(runner: Any, n: int) -> Callable[[], int]:
+    """A function advancing ``runner`` by ``n`` steps (no saved rows); returns iterations."""
+    dtype = runner.W.dtype if hasattr(runner, "W") else runner.Y.dtype
+    out = np.empty((0, runner.M, *runner.core), dtype=dtype)
+
+    def go() -> int:
+        before = runner.iterations_total
+        runner.advance(n, 10**12, 10**15, out)
+        return runner.iterations_total - before
+
+    return go
+
+
+@numba.njit(cache=True)
+def rigid_body_field(W, out, C):  # type: ignore[no-untyped-def]
+    """The so(n) rigid body's ``B = C * W`` (``C = -I^{-1}``), written by a user."""
+    n = W.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = C[i, j] * W[i, j]
+
+
+def bench_8(quick: bool) -> list[dict[str, Any]]:
+    prob, W0 = iso.models.rigid_body(10)
+    C = np.ascontiguousarray(prob.kernel.coeff)
+    user = dataclasses.replace(prob, kernel=iso.CompiledB(rigid_body_field, (C,)))
+    plain = dataclasses.replace(prob, kernel=None)
+    m, h = iso.IsoMP(), 0.1
+    n_fast, n_py = (20_000, 300) if not quick else (4_000, 60)
+    built = _runner_steps(compiled_runner(prob, m, W0, h), n_fast)
+    mine = _runner_steps(compiled_runner(user, m, W0, h), n_fast)
+    python = _runner_steps(PythonRunner(plain, m, W0, h), n_py)
+    t_mine, t_built = _paired(mine, built)
+    t_mine2, t_py = _paired(mine, python, 3)  # the Python B paired with CompiledB again
+    per = {
+        "CompiledB": min(t_mine, t_mine2) / n_fast,
+        "built-in kernel": t_built / n_fast,
+        "Python B": t_py / n_py,
+    }
+    ratio = per["CompiledB"] / per["built-in kernel"]
+    speedup = per["Python B"] / per["CompiledB"]
+    us = {k: v * 1e6 for k, v in per.items()}
+    return [
+        {"id": 8, "name": "so(10) rigid body: CompiledB / built-in kernel, time per step",
+         "us_per_step": us, "metric": "ratio", "value": ratio, "target": "<= 1.2",
+         "met": ratio <= 1.2},
+        {"id": 8, "name": "so(10) rigid body: Python B / CompiledB, time per step",
+         "us_per_step": us, "metric": "speed-up", "value": speedup, "target": ">= 15",
+         "met": speedup >= 15.0},
+    ]  # fmt: skip
+
+
+def _solve_per_step(prob: Any, y0: Any, n: int, save_every: int) -> Callable[[], None]:
+    def go() -> None:
+        iso.solve(prob, iso.IsoMP(), y0, dt=0.1, n_steps=n, save_every=save_every, progress=False)
+
+    return go
+
+
+_MEMORY_PROBE = """
+import resource, sys, time, numpy as np, isoflow as iso
+from threadpoolctl import threadpool_limits
+threadpool_limits(1)
+M, n, se = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+prob, W0 = iso.models.rigid_body(10)
+alg = prob.algebra
+W = alg.random(0, batch=(M,)) * float(alg.norm(W0) / np.sqrt(alg.dim))
+iso.solve(prob, iso.IsoMP(), W[:20], dt=0.1, n_steps=3, progress=False)
+t = time.perf_counter()
+sol = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=n, save_every=se, progress=False)
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+print(time.perf_counter() - t, sol.ys.nbytes, peak)
+"""
+
+
+def _probe(M: int, n: int, save_every: int) -> tuple[float, int, int]:
+    """``(seconds, saved bytes, peak RSS bytes)`` of an ensemble run in a fresh process."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", _MEMORY_PROBE, str(M), str(n), str(save_every)],
+        capture_output=True, text=True, env=env, check=True,
+    )  # fmt: skip
+    t, saved, peak = out.stdout.split()[-3:]
+    return float(t), int(saved), int(peak)
+
+
+def bench_9(quick: bool) -> list[dict[str, Any]]:
+    prob, W0 = iso.models.rigid_body(10)
+    n = 20_000 if not quick else 4_000
+    t1, t100 = _paired(_solve_per_step(prob, W0, n, 1), _solve_per_step(prob, W0, n, 100), 3)
+    r1 = t1 / t100
+    M, steps = (10_000, 1_000) if not quick else (2_000, 200)
+    best = {10: np.inf, steps: np.inf}
+    mem: dict[int, tuple[int, int]] = {}
+    for _ in range(2 if not quick else 1):
+        for se in (10, steps):
+            t, saved, peak = _probe(M, steps, se)
+            best[se] = min(best[se], t)
+            mem[se] = (saved, peak)
+    r2 = best[10] / best[steps]
+    return [
+        {"id": 9, "name": "so(10): save_every=1 / save_every=100, diagnostics on, time per step",
+         "us_per_step": {"save_every=1": t1 / n * 1e6, "save_every=100": t100 / n * 1e6},
+         "metric": "ratio", "value": r1, "target": "<= 1.5", "met": r1 <= 1.5},
+        {"id": 9, "name": f"{M} so(10): save_every=10 / end only, time per system-step",
+         "us_per_system_step": {k: v / (M * steps) * 1e6 for k, v in best.items()},
+         "saved_GB": mem[10][0] / 1e9, "peak_RSS_GB": mem[10][1] / 1e9,
+         "metric": "ratio", "value": r2, "target": "<= 1.5", "met": r2 <= 1.5},
+    ]  # fmt: skip
+
+
+def _elementwise_problem(alg: Any, seed: int = 0) -> tuple[Any, Any]:
+    rng = np.random.default_rng(seed)
+    n = alg.shape[0]
+    A = rng.uniform(0.5, 1.5, (n, n))
+    C = -0.5 * (A + A.T)
+    kernel = iso.ElementwiseLinear(C)
+    prob = iso.IsospectralProblem(B=kernel.evaluate, algebra=alg, kernel=kernel)
+    W0 = alg.random(seed + 1)
+    return prob, W0 * (np.sqrt(n) / float(alg.norm(W0)))
+
+
+def bench_10(quick: bool) -> list[dict[str, Any]]:
+    out = []
+    sizes = (32, 64, 96) if not quick else (32, 64)
+    for make in (iso.algebras.so, iso.algebras.u):
+        for n in sizes:
+            alg = make(n)
+            prob, W0 = _elementwise_problem(alg)
+            steps = max(20, int(2e6 / n**3)) if not quick else 10
+            go = _runner_steps(compiled_runner(prob, iso.IsoMP(), W0, 0.1), steps)
+            its = go()
+            C = prob.kernel.coeff
+            reps = max(1, its)
+            bare = _two_products(lambda X, B, C=C: np.multiply(C, X, out=B), W0.copy(), reps)
+            t_it, t_bare = _paired(go, bare)
+            ratio = (t_it / its) / (t_bare / reps)
+            out.append(
+                {"id": 10, "name": f"dense {alg.name}: time per iteration / two products + B",
+                 "us_per_iteration": t_it / its * 1e6, "us_bare": t_bare / reps * 1e6,
+                 "iterations_per_step": its / steps, "metric": "ratio", "value": ratio,
+                 "target": "<= 1.5", "met": ratio <= 1.5}
+            )  # fmt: skip
+    return out
+
+
+def bench_11(quick: bool) -> list[dict[str, Any]]:
+    from isoflow.threads import available_cores, thread_limits
+
+    M = 1000 if not quick else 200
+    alg = iso.algebras.so(64)
+    prob, W0 = _elementwise_problem(alg)
+    Ws = np.stack([W0 * (0.8 + 0.4 * i / M) for i in range(M)])
+    plain = dataclasses.replace(prob, kernel=None)
+    m, n = iso.IsoMP(), 3
+    with thread_limits(blas=1, numba=available_cores()):
+        fast = _runner_steps(compiled_runner(prob, m, Ws, 0.1), n)
+        base = _runner_steps(PythonRunner(plain, m, Ws, 0.1), n)
+        t_fast, t_base = _paired(fast, base, 3)
+    speedup = t_base / t_fast
+    return [
+        {"id": 11, "name": f"{M} so(64): NumPy path (stacked matmul) / compiled, per system-step",
+         "us_per_system_step": {"compiled": t_fast / (n * M) * 1e6,
+                                "numpy": t_base / (n * M) * 1e6},
+         "metric": "speed-up", "value": speedup, "target": ">= 2", "met": speedup >= 2.0}
+    ]  # fmt: skip
+
+
+def bench_12(quick: bool) -> list[dict[str, Any]]:
+    out = []
+    sizes = (256, 512, 1024) if not quick else (256,)
+    for N in sizes:
+        prob, W0 = iso.models.euler_sphere(N=N, seed=1)
+        h = 0.3 / np.linalg.norm(prob.B(W0), 2)
+        steps = 3 if N < 1024 else 2
+        go = _runner_steps(compiled_runner(prob, iso.IsoMP(), W0, h), steps)
+        its = go()
+        f, fargs = prob.kernel.field()
+        reps = max(1, min(its, 6))
+        X0 = np.ascontiguousarray(W0)
+        field = _two_products(lambda X, B, f=f, a=fargs: f(X, B, *a), X0, reps)
+        t_it, t_bare = _paired(go, field, 3)
+        ratio = (t_it / its) / (t_bare / reps)
+        out.append(
+            {"id": 12, "name": f"euler_sphere N = {N}: time per iteration / two products + Poisson",
+             "ms_per_iteration": t_it / its * 1e3, "ms_bare": t_bare / reps * 1e3,
+             "iterations_per_step": its / steps, "metric": "ratio", "value": ratio,
+             "target": "<= 1.15", "met": ratio <= 1.15}
+        )  # fmt: skip
+    return out
+
+
+def bench_13(quick: bool) -> list[dict[str, Any]]:
+    out = []
+    sizes = (128, 256, 512) if not quick else (128,)
+    for N in sizes:
+        prob, W0 = iso.models.euler_sphere(N=N, seed=1)
+        h = float(0.3 / np.linalg.norm(prob.B(W0), 2))
+        steps = 40 if N <= 256 else 12
+        res = {}
+        for label, method in (
+            ("X0 = W", iso.IsoMP(initial_guess="state")),
+            ("default", iso.IsoMP()),
+            ("Anderson 3", iso.IsoMP(solver=iso.FixedPoint(anderson=3))),
+        ):
+            sol = iso.solve(prob, method, W0, dt=h, n_steps=steps, save_every=steps, progress=False)
+            res[label] = sol.stats.iterations_mean
+        best = min(res["default"], res["Anderson 3"])
+        out.append(
+            {"id": 13, "name": f"euler_sphere N = {N}, h ||B|| = 0.3: iterations per step",
+             "iterations_per_step": res, "metric": "iterations", "value": best,
+             "target": "<= 10", "met": best <= 10.0}
+        )  # fmt: skip
+    prob, W0 = iso.models.rigid_body(10)
+    res = {}
+    for label, method in (
+        ("X0 = W", iso.IsoMP(initial_guess="state")),
+        ("default", iso.IsoMP()),
+        ("Anderson 3", iso.IsoMP(solver=iso.FixedPoint(anderson=3))),
+    ):
+        sol = iso.solve(prob, method, W0, dt=0.1, n_steps=1000, save_every=1000, progress=False)
+        res[label] = sol.stats.iterations_mean
+    out.append(
+        {"id": 13, "name": "paper's rigid body so(10), h = 0.1: iterations per step",
+         "iterations_per_step": res, "metric": "iterations", "value": res["default"],
+         "target": "< X0 = W", "met": res["default"] < res["X0 = W"]}
+    )  # fmt: skip
+    return out
+
+
+#: benchmark number -> function(quick) -> list of result records
+BENCHMARKS: dict[int, Callable[[bool], list[dict[str, Any]]]] = {
+    8: bench_8,
+    9: bench_9,
+    10: bench_10,
+    11: bench_11,
+    12: bench_12,
+    13: bench_13,
+}
