@@ -250,6 +250,9 @@ class PythonRunner(Runner):
             return None, exc
 
     def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+        if self.single:
+            self._advance_single(nsteps, save_every, k_final, out)
+            return
         row = 0
         fails = self.failures
         for _ in range(nsteps):
@@ -261,6 +264,42 @@ class PythonRunner(Runner):
             if k % save_every == 0 or k == k_final:
                 out[row] = self.Y
                 row += 1
+
+    def _advance_single(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+        """:meth:`advance` for one system (no member bookkeeping on the way)."""
+        if not self.failures.alive[0]:
+            return
+        method, problem, h = self.method, self.problem, self.h
+        y, st = self.Y[0], self.mstate
+        row = 0
+        for _ in range(nsteps):
+            k = self.k
+            try:
+                res = method.step(problem, y, h, st)
+            except Exception as exc:  # B (or the user's code under it) raised
+                self.failures.record(0, k, FAIL_B_RAISED, 0, float("nan"))
+                self.failures.messages[0] = f"{type(exc).__name__}: {exc}"
+                self.last_exception = exc
+                break
+            its = 0 if res.iterations is None else int(res.iterations)
+            code = STATUS_CONVERGED if res.status is None else int(res.status)
+            if code == STATUS_CONVERGED and not np.isfinite(res.y).all():
+                code = STATUS_NON_FINITE
+            self.iterations_total += its
+            self.iterations_max = max(self.iterations_max, its)
+            if code != STATUS_CONVERGED:
+                resid = float("nan") if res.residual is None else float(res.residual)
+                self.failures.record(0, k, code, its, resid)
+                break
+            if res.residual is not None:
+                self.residual_max = max(self.residual_max, float(res.residual))
+            y, st = res.y, res.state
+            self.k = k + 1
+            if self.k % save_every == 0 or self.k == k_final:
+                out[row, 0] = y
+                row += 1
+        self.Y[0] = y
+        self.mstate = st
 
     def _one_step(self, k: int, alive: NDArray[np.intp]) -> None:
         """Step ``k`` (from ``t0 + k h``) of the members ``alive``."""

@@ -229,13 +229,13 @@ class NonlinearSolver:
         warnings.
         """
         with np.errstate(over="ignore", invalid="ignore"):
+            if prob.algebra.batch_shape(X0) == ():
+                return self._solve_single(prob, X0)
             return self._solve(prob, X0)
 
     def _solve(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
         alg = prob.algebra
         batch = alg.batch_shape(X0)
-        if batch == ():
-            return self._solve_single(prob, X0)
         core = alg.shape
         M = int(np.prod(batch))
         X = np.array(X0, dtype=alg.dtype, copy=True).reshape(M, *core)

@@ -39,75 +39,78 @@ import numba
 __all__ = ["finish", "iterate_sl2", "iterate_smm", "iterate_so3"]
 
 
-@numba.njit(cache=True)
-def iterate_so3(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """One IsoMP iteration on :math:`(\\mathbb{R}^3,\\times)^N`."""
+@numba.njit(cache=True, inline="always")
+def _so3(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
+    r"""``(C, T)`` on :math:`(\mathbb{R}^3,\times)`: ``b x x`` and ``-(b . x) b``."""
+    d = -(b0 * x0 + b1 * x1 + b2 * x2)
+    return (
+        b1 * x2 - b2 * x1, b2 * x0 - b0 * x2, b0 * x1 - b1 * x0,
+        d * b0, d * b1, d * b2,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _sl2(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
+    r"""``(C, T)`` on :math:`(\mathbb{R}^3,\times_L)`: ``-2L(b x x)`` and
+    ``2 (b ._L x) b - (b ._L b) x``."""
+    bx = b0 * x0 + b1 * x1 - b2 * x2
+    bb = b0 * b0 + b1 * b1 - b2 * b2
+    return (
+        -2.0 * (b1 * x2 - b2 * x1), -2.0 * (b2 * x0 - b0 * x2), 2.0 * (b0 * x1 - b1 * x0),
+        2.0 * bx * b0 - bb * x0, 2.0 * bx * b1 - bb * x1, 2.0 * bx * b2 - bb * x2,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _put(W, G, aux, j, c0, c1, c2, g0, g1, g2, x0, x1, x2):  # type: ignore[no-untyped-def]
+    """Store ``G`` and ``C`` of particle ``j // 3``; its contribution to ``|G - X|^2``."""
+    G[j] = g0
+    G[j + 1] = g1
+    G[j + 2] = g2
+    aux[j] = c0
+    aux[j + 1] = c1
+    aux[j + 2] = c2
+    return (g0 - x0) ** 2 + (g1 - x1) ** 2 + (g2 - x2) ** 2
+
+
+@numba.njit(cache=True, inline="always")
+def _isomp(form, f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """One IsoMP iteration with the products ``form`` (:func:`_so3` or :func:`_sl2`)."""
     N = sp[0]
     Xm = X.reshape((N, 3))
     Bm = work[0].reshape((N, 3))
     f(Xm, Bm, *fargs)
     rr = 0.0
     for i in range(N):
-        b0, b1, b2 = Bm[i, 0], Bm[i, 1], Bm[i, 2]
         x0, x1, x2 = Xm[i, 0], Xm[i, 1], Xm[i, 2]
-        c0 = b1 * x2 - b2 * x1
-        c1 = b2 * x0 - b0 * x2
-        c2 = b0 * x1 - b1 * x0
-        d = -(b0 * x0 + b1 * x1 + b2 * x2)
+        c0, c1, c2, t0, t1, t2 = form(Bm[i, 0], Bm[i, 1], Bm[i, 2], x0, x1, x2)
         j = 3 * i
-        g0 = W[j] + half * c0 + quarter * (d * b0)
-        g1 = W[j + 1] + half * c1 + quarter * (d * b1)
-        g2 = W[j + 2] + half * c2 + quarter * (d * b2)
-        G[j] = g0
-        G[j + 1] = g1
-        G[j + 2] = g2
-        aux[j] = c0
-        aux[j + 1] = c1
-        aux[j + 2] = c2
-        rr += (g0 - x0) ** 2 + (g1 - x1) ** 2 + (g2 - x2) ** 2
+        g0 = W[j] + half * c0 + quarter * t0
+        g1 = W[j + 1] + half * c1 + quarter * t1
+        g2 = W[j + 2] + half * c2 + quarter * t2
+        rr += _put(W, G, aux, j, c0, c1, c2, g0, g1, g2, x0, x1, x2)
     return rr
+
+
+@numba.njit(cache=True)
+def iterate_so3(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    r"""One IsoMP iteration on :math:`(\mathbb{R}^3,\times)^N`."""
+    return _isomp(_so3, f, fargs, sp, W, X, G, aux, work, half, quarter)
 
 
 @numba.njit(cache=True)
 def iterate_sl2(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """One IsoMP iteration on :math:`(\\mathbb{R}^3,\\times_L)^N` (the hyperbolic midpoint)."""
-    N = sp[0]
-    Xm = X.reshape((N, 3))
-    Bm = work[0].reshape((N, 3))
-    f(Xm, Bm, *fargs)
-    rr = 0.0
-    for i in range(N):
-        b0, b1, b2 = Bm[i, 0], Bm[i, 1], Bm[i, 2]
-        x0, x1, x2 = Xm[i, 0], Xm[i, 1], Xm[i, 2]
-        c0 = -2.0 * (b1 * x2 - b2 * x1)
-        c1 = -2.0 * (b2 * x0 - b0 * x2)
-        c2 = 2.0 * (b0 * x1 - b1 * x0)
-        bx = b0 * x0 + b1 * x1 - b2 * x2
-        bb = b0 * b0 + b1 * b1 - b2 * b2
-        j = 3 * i
-        g0 = W[j] + half * c0 + quarter * (2.0 * bx * b0 - bb * x0)
-        g1 = W[j + 1] + half * c1 + quarter * (2.0 * bx * b1 - bb * x1)
-        g2 = W[j + 2] + half * c2 + quarter * (2.0 * bx * b2 - bb * x2)
-        G[j] = g0
-        G[j + 1] = g1
-        G[j + 2] = g2
-        aux[j] = c0
-        aux[j + 1] = c1
-        aux[j + 2] = c2
-        rr += (g0 - x0) ** 2 + (g1 - x1) ** 2 + (g2 - x2) ** 2
-    return rr
+    r"""One IsoMP iteration on :math:`(\mathbb{R}^3,\times_L)^N` (the hyperbolic midpoint)."""
+    return _isomp(_sl2, f, fargs, sp, W, X, G, aux, work, half, quarter)
 
 
-@numba.njit(cache=True)
-def iterate_smm(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """One spherical-midpoint iteration on the average ``M = X``; ``work[1]`` holds ``m``."""
-    N = sp[0]
-    Bm = work[0].reshape((N, 3))
-    mid = work[1]
+@numba.njit(cache=True, inline="always")
+def spherical_point(W, M, mid, N):  # type: ignore[no-untyped-def]
+    """``mid_i = sqrt(|w_i| |2M_i - w_i|) M_i / |M_i|`` (``0`` where ``M_i = 0``), flat."""
     for i in range(N):
         j = 3 * i
         w0, w1, w2 = W[j], W[j + 1], W[j + 2]
-        a0, a1, a2 = X[j], X[j + 1], X[j + 2]
+        a0, a1, a2 = M[j], M[j + 1], M[j + 2]
         nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         v0, v1, v2 = 2.0 * a0 - w0, 2.0 * a1 - w1, 2.0 * a2 - w2
         nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
@@ -116,27 +119,35 @@ def iterate_smm(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignor
         mid[j] = fac * a0
         mid[j + 1] = fac * a1
         mid[j + 2] = fac * a2
-    Mm = mid.reshape((N, 3))
-    f(Mm, Bm, *fargs)
+
+
+@numba.njit(cache=True, inline="always")
+def smm_update(W, X, G, aux, B, mid, N, half):  # type: ignore[no-untyped-def]
+    """``C = B x m``, ``G = W + h/2 C`` from the field ``B`` at the points ``mid`` (flat);
+    returns ``|G - X|^2``."""
     rr = 0.0
     for i in range(N):
-        b0, b1, b2 = Bm[i, 0], Bm[i, 1], Bm[i, 2]
-        m0, m1, m2 = Mm[i, 0], Mm[i, 1], Mm[i, 2]
+        j = 3 * i
+        m0, m1, m2 = mid[j], mid[j + 1], mid[j + 2]
+        b0, b1, b2 = B[j], B[j + 1], B[j + 2]
         c0 = b1 * m2 - b2 * m1
         c1 = b2 * m0 - b0 * m2
         c2 = b0 * m1 - b1 * m0
-        j = 3 * i
         g0 = W[j] + half * c0
         g1 = W[j + 1] + half * c1
         g2 = W[j + 2] + half * c2
-        G[j] = g0
-        G[j + 1] = g1
-        G[j + 2] = g2
-        aux[j] = c0
-        aux[j + 1] = c1
-        aux[j + 2] = c2
-        rr += (g0 - X[j]) ** 2 + (g1 - X[j + 1]) ** 2 + (g2 - X[j + 2]) ** 2
+        rr += _put(W, G, aux, j, c0, c1, c2, g0, g1, g2, X[j], X[j + 1], X[j + 2])
     return rr
+
+
+@numba.njit(cache=True)
+def iterate_smm(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+    """One spherical-midpoint iteration on the average ``M = X``; ``work[1]`` holds ``m``."""
+    N = sp[0]
+    mid = work[1]
+    spherical_point(W, X, mid, N)
+    f(mid.reshape((N, 3)), work[0].reshape((N, 3)), *fargs)
+    return smm_update(W, X, G, aux, work[0], mid, N, half)
 
 
 @numba.njit(cache=True)

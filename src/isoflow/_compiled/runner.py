@@ -31,13 +31,13 @@ from numpy.typing import NDArray
 
 from .._stepping import MemberFailures, Runner
 from ..algebras import Hermitian, SL2Vectors, SpecialOrthogonal, SpinVectors, Symmetric, Unitary
-from ..kernels import ElementwiseLinear, SpinNeighbourSum
+from ..kernels import ElementwiseLinear, PairwiseVortex, SpinNeighbourSum
 from ..methods import Composition, IsoMP, Method, SphericalMidpoint
 from ..methods import composition as _composition
 from ..methods.isomp import extrapolation_weights
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
-from . import blocked, dense, particles, spin_chain
+from . import blocked, dense, particles, spin_chain, vortices
 from .driver import (
     REC_FAIL_ITERATIONS,
     REC_FAIL_RESIDUAL,
@@ -198,6 +198,19 @@ def _particle_layout(problem: IsospectralProblem, smm: bool) -> Layout | None:
     alg = problem.algebra
     kernel = problem.kernel
     N = alg.shape[0]
+    if isinstance(kernel, PairwiseVortex):  # checked against the space with the problem
+        sphere = kernel.geometry == "sphere"
+        if smm and not sphere:
+            return None
+        it = (
+            vortices.iterate_sphere_smm if smm
+            else vortices.iterate_sphere if sphere
+            else vortices.iterate_hyperbolic
+        )  # fmt: skip
+        return Layout(
+            f"point vortices ({kernel.geometry}, fused pairs)", it, particles.finish, (N,),
+            2 if smm else 1, **_plain(alg.shape, np.float64),
+        )  # fmt: skip
     if type(alg) is SpinVectors:
         if isinstance(kernel, SpinNeighbourSum) and N >= 2:
             return _chain_layout(N, kernel.coupling, smm)
