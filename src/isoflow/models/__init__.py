@@ -7,6 +7,8 @@ The model modules are imported on first use (``iso.models.rigid_body`` imports o
 from __future__ import annotations
 
 import importlib
+import sys
+import types
 from typing import Any
 
 from .._errors import ParameterError as ParameterError
@@ -40,3 +42,22 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(__all__)
+
+
+class _Models(types.ModuleType):
+    """This package, keeping each model function bound under its name.
+
+    Importing a submodule (``from isoflow.models.brockett import BROCKETT_DEFAULT_SCALE``, or
+    ``sphere_vortices.py`` importing helpers of ``hyperbolic_vortices.py``) makes the import
+    system set the package attribute of the submodule's name to the module, which would shadow
+    the function of the same name (``iso.models.brockett(...)``: "'module' object is not
+    callable"). The function is bound instead.
+    """
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if isinstance(value, types.ModuleType) and _WHERE.get(name) == name:
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Models
