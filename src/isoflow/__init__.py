@@ -7,14 +7,20 @@ symplectic method for isospectral flows*. Quick start::
     alg = iso.algebras.so(10)
     prob = iso.IsospectralProblem(B=my_B, algebra=alg, hamiltonian=my_H)
     sol = iso.solve(prob, iso.IsoMP(), y0=W0, dt=0.1, t1=100.0, save_every=10)
+
+Importing the package loads the numerical core only (spaces, problems, methods, solvers, the
+time loop, diagnostics). The rest loads on first use (PEP 562): ``iso.models``, ``iso.sphere``,
+``iso.threads``, ``iso.io`` (HDF5), ``iso.registry``, ``iso.experiments``, ``iso.plotting``
+(matplotlib) and ``iso.reference_solution`` (SciPy's integrators); numba loads when a run
+first takes a compiled path.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from . import algebras as algebras
-from . import models as models
-from . import sphere as sphere
-from . import threads as threads
 from ._errors import ConvergenceError as ConvergenceError
 from ._errors import DtypeError as DtypeError
 from ._errors import InvalidBError as InvalidBError
@@ -22,6 +28,7 @@ from ._errors import IsoflowError as IsoflowError
 from ._errors import NonFiniteError as NonFiniteError
 from ._errors import NotInSpaceError as NotInSpaceError
 from ._errors import ParameterError as ParameterError
+from ._errors import ResultWriteError as ResultWriteError
 from ._errors import ShapeError as ShapeError
 from ._errors import StepSizeError as StepSizeError
 from ._errors import TimeSpanError as TimeSpanError
@@ -47,16 +54,44 @@ from .methods import StepResult as StepResult
 from .nonlinear import FixedPoint as FixedPoint
 from .nonlinear import Newton as Newton
 from .problems import IsospectralProblem as IsospectralProblem
-from .reference import reference_solution as reference_solution
 
-try:
-    __version__ = version("isoflow")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0+unknown"
+if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
+    from . import experiments as experiments
+    from . import io as io
+    from . import models as models
+    from . import plotting as plotting
+    from . import registry as registry
+    from . import sphere as sphere
+    from . import threads as threads
+    from ._version import __version__ as __version__
+    from .reference import reference_solution as reference_solution
 
-from . import experiments as experiments
-from . import io as io
-from . import registry as registry
+#: Submodules loaded on first attribute access.
+_LAZY_MODULES = frozenset(
+    {"experiments", "io", "models", "plotting", "registry", "sphere", "threads"}
+)
+#: Attributes loaded on first access: name -> (module, attribute).
+_LAZY_ATTRIBUTES = {
+    "__version__": ("._version", "__version__"),
+    "reference_solution": (".reference", "reference_solution"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Load the lazy submodules and attributes (PEP 562)."""
+    if name in _LAZY_MODULES:
+        return importlib.import_module(f".{name}", __name__)
+    if name in _LAZY_ATTRIBUTES:
+        module, attr = _LAZY_ATTRIBUTES[name]
+        value = getattr(importlib.import_module(module, __name__), attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | _LAZY_MODULES | set(_LAZY_ATTRIBUTES))
+
 
 __all__ = [
     "RK4",
@@ -80,6 +115,7 @@ __all__ = [
     "NotInSpaceError",
     "PairwiseVortex",
     "ParameterError",
+    "ResultWriteError",
     "ShapeError",
     "Solution",
     "SolveStats",
@@ -94,6 +130,7 @@ __all__ = [
     "experiments",
     "io",
     "models",
+    "plotting",
     "reference_solution",
     "registry",
     "solve",
