@@ -1,40 +1,49 @@
-"""The paper's numerical experiments (Section 3), as functions that return data.
+"""The paper's numerical experiments (Section 3): each one object with its run and its figure.
 
-Each experiment is a function ``name(*, quick=False, progress=None, **parameters)`` returning an
-:class:`ExperimentResult` (plain arrays in ``data``, a JSON-ready ``summary`` with parameters,
-library version, drifts, orders, timings and ``checks``); plotting is separate
-(:mod:`isoflow.plotting`). So from Python::
+An experiment is an :class:`Experiment` (one module each): ``run(quick=..., progress=...,
+**parameters)`` returns an :class:`ExperimentResult` (plain arrays in ``data``, a JSON-ready
+``summary`` with parameters, library version, drifts, orders, timings and ``checks``), and
+``figure(result)`` draws it. Calling the object runs it::
 
     import isoflow as iso
     res = iso.experiments.spin_chain_error(exponents=(4, 5, 6, 7))
     print(res.summary["observed_order"])
-    fig = iso.plotting.plot_experiment(res)
+    fig = iso.experiments.spin_chain_error.figure(res)
 
 :func:`run_experiment` is what ``isoflow reproduce`` does for one experiment: run it, write the
-figure (PNG, and PDF) and ``<name>.json`` into a directory.
+figure (PNG, and PDF) and ``<name>.json`` into a directory. The names are those of
+:data:`isoflow.registry.EXPERIMENTS`; adding an experiment is one module here and one line
+there.
 """
 
 from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ._common import ExperimentResult, fit_order
-from .euler_sphere import euler_sphere
-from .matrix_flows import brockett, rigid_body
-from .spin_chain import spin_chain_cost, spin_chain_energy, spin_chain_error
-from .vortices import vortices_invariants, vortices_trajectories
+from .. import registry
+from .._figures import save
+from ._base import Experiment, ExperimentResult, fit_order
+from .brockett import brockett as brockett
+from .euler_sphere import euler_sphere as euler_sphere
+from .rigid_body import rigid_body as rigid_body
+from .spin_chain_cost import spin_chain_cost as spin_chain_cost
+from .spin_chain_energy import spin_chain_energy as spin_chain_energy
+from .spin_chain_error import spin_chain_error as spin_chain_error
+from .vortices_invariants import vortices_invariants as vortices_invariants
+from .vortices_trajectories import vortices_trajectories as vortices_trajectories
 
 __all__ = [
     "EXPERIMENTS",
+    "Experiment",
     "ExperimentResult",
     "brockett",
     "euler_sphere",
+    "figure",
     "fit_order",
     "rigid_body",
     "run_experiment",
@@ -45,17 +54,17 @@ __all__ = [
     "vortices_trajectories",
 ]
 
-#: command-line name -> experiment function
-EXPERIMENTS: dict[str, Callable[..., ExperimentResult]] = {
-    "rigid-body": rigid_body,
-    "brockett": brockett,
-    "spin-chain-cost": spin_chain_cost,
-    "spin-chain-energy": spin_chain_energy,
-    "spin-chain-error": spin_chain_error,
-    "vortices-trajectories": vortices_trajectories,
-    "vortices-invariants": vortices_invariants,
-    "euler-sphere": euler_sphere,
+#: Command-line name -> experiment, in the order of :data:`isoflow.registry.EXPERIMENTS`.
+EXPERIMENTS: dict[str, Experiment] = {
+    name: registry.get_experiment(name) for name in registry.EXPERIMENTS
 }
+
+
+def figure(result: ExperimentResult) -> Any:
+    """The figure of a result of any experiment (dispatch on ``result.name``)."""
+    if result.name not in EXPERIMENTS:
+        raise ValueError(f"no experiment called {result.name!r}")
+    return EXPERIMENTS[result.name].figure(result)
 
 
 def _json_default(obj: Any) -> Any:
@@ -87,23 +96,22 @@ def run_experiment(
 ) -> list[Path]:
     """Run experiment ``name`` and write ``<name>.png`` (and ``.pdf``) and ``<name>.json``.
 
-    Returns the written paths. The JSON holds the experiment's summary plus ``"passed"`` (all
-    its checks hold).
+    Files of an earlier run in ``out`` are replaced (regular files only). Returns the written
+    paths. The JSON holds the experiment's summary plus ``"passed"`` (all its checks hold).
     """
-    from ..plotting import plot_experiment, save
-
-    if name not in EXPERIMENTS:
-        raise KeyError(f"unknown experiment {name!r} (choose from {', '.join(EXPERIMENTS)})")
+    experiment = registry.get_experiment(name)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    res = EXPERIMENTS[name](quick=quick, progress=progress)
-    fig = plot_experiment(res)
+    res = experiment.run(quick=quick, progress=progress)
+    fig = experiment.figure(res)
     files = [out / f"{name}.png"]
     if pdf:
         files.append(out / f"{name}.pdf")
     for f in files:
-        save(fig, f)
+        save(fig, f, force=True)
     summary = dict(res.summary, passed=res.passed)
     path = out / f"{name}.json"
+    if path.exists() and not path.is_file():
+        raise FileExistsError(f"{path} exists and is not a regular file; not replacing it")
     path.write_text(json.dumps(_clean(summary), indent=2, default=_json_default) + "\n")
     return [*files, path]

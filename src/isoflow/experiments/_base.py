@@ -1,17 +1,20 @@
-"""Shared pieces of the experiments: the result container and small numerical helpers."""
+"""What every experiment shares: the :class:`Experiment` interface, its result, checks, fits."""
 
 from __future__ import annotations
 
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ExperimentResult", "check", "fit_order", "header", "timer"]
+from .._version import __version__
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["Experiment", "ExperimentResult", "check", "fit_order", "header"]
 
 Array = NDArray[Any]
 
@@ -40,6 +43,40 @@ class ExperimentResult:
         return all(c["ok"] for c in self.summary.get("checks", {}).values())
 
 
+class Experiment(ABC):
+    """One of the paper's experiments: how to run it and how to draw it, in one object.
+
+    A subclass sets :attr:`name` and :attr:`description` and writes :meth:`run` (keyword
+    parameters with the paper's values as defaults, plus ``quick`` and ``progress``; no plotting)
+    and :meth:`figure`. Calling the object runs it: ``iso.experiments.rigid_body(T=10)``.
+    Adding an experiment is one module in :mod:`isoflow.experiments` and its name in
+    :data:`isoflow.registry.EXPERIMENTS`.
+    """
+
+    #: Command-line name, e.g. ``"rigid-body"``.
+    name: ClassVar[str]
+    #: One line: the run and the claim it checks.
+    description: ClassVar[str]
+
+    @abstractmethod
+    def run(self, *args: Any, **kwargs: Any) -> ExperimentResult:
+        """Run the experiment (``quick=True``: a reduced version; ``progress``: a bar)."""
+
+    @abstractmethod
+    def figure(self, result: ExperimentResult) -> Figure:
+        """The paper-style figure of a result of :meth:`run`."""
+
+    def __call__(self, **kwargs: Any) -> ExperimentResult:
+        return self.run(**kwargs)
+
+    def __repr__(self) -> str:
+        return f"<experiment {self.name!r}: {self.description}>"
+
+    def _check_result(self, result: ExperimentResult) -> None:
+        if result.name != self.name:
+            raise ValueError(f"a result of {result.name!r}, not of {self.name!r}")
+
+
 def check(value: float, bound: float, claim: str, *, below: bool = True) -> dict[str, Any]:
     """A JSON-ready check ``value <= bound`` (or ``>=`` when ``below=False``)."""
     v = float(value)
@@ -63,20 +100,8 @@ def fit_order(hs: Array, errors: Array) -> float:
     return float(slope)
 
 
-@contextmanager
-def timer(out: dict[str, float], key: str) -> Iterator[None]:
-    """Add the wall time of the block to ``out[key]`` (seconds)."""
-    start = time.perf_counter()
-    try:
-        yield
-    finally:
-        out[key] = out.get(key, 0.0) + time.perf_counter() - start
-
-
 def header(name: str, parameters: dict[str, Any], quick: bool) -> dict[str, Any]:
     """The common head of a JSON summary: experiment name, library version, parameters."""
-    from .. import __version__
-
     return {
         "experiment": name,
         "isoflow_version": __version__,
