@@ -3,17 +3,10 @@
 from __future__ import annotations
 
 import re
-import shutil
-import subprocess
-import sys
 
 import pytest
 
-
-def _run(*args: str) -> subprocess.CompletedProcess[str]:
-    exe = shutil.which("isoflow")
-    cmd = [exe, *args] if exe else [sys.executable, "-m", "isoflow.cli", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
+from cli_helpers import run_cli as _run
 
 
 def test_demo_reports_rounding_level_casimir_drift() -> None:

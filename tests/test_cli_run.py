@@ -4,22 +4,14 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
+from cli_helpers import run_cli as _run
 from isoflow import io
-
-
-def _run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    exe = shutil.which("isoflow")
-    cmd = [exe, *args] if exe else [sys.executable, "-m", "isoflow.cli", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False, cwd=cwd)
 
 
 def test_run_info_plot(tmp_path: Path) -> None:

@@ -1,25 +1,31 @@
-"""The ``isoflow`` command line.
+"""The ``isoflow`` command line: it parses and prints; the work is library calls.
 
 Commands:
 
 * ``isoflow demo``: the paper's so(10) rigid body with IsoMP, printing invariant drifts;
-* ``isoflow run MODEL ... --out FILE`` (or ``--config run.toml``): any registered model and
-  method, streamed to an HDF5 result file; ``isoflow run --resume FILE`` continues a stopped or
-  killed run bit for bit;
+* ``isoflow run MODEL ... --out FILE`` (or ``--config run.toml``): a model of
+  :mod:`isoflow.registry` (built in, registered by an installed package, or your own
+  ``--model package.module:factory``) streamed to an HDF5 result file; ``isoflow run --resume
+  FILE`` continues a stopped or killed run bit for bit;
 * ``isoflow info FILE``: what a result file holds, its parameters and invariant drifts;
 * ``isoflow plot FILE --out PNG``: invariants and state components from a result file;
-* ``isoflow reproduce NAME|all --out DIR [--quick]``: the paper's experiments, figures and JSON.
+* ``isoflow reproduce NAME|all --out DIR [--quick]``: the paper's experiments, figures and JSON;
+* ``isoflow list [models|methods|solvers|experiments]``: the names the other commands take;
+* ``isoflow bench ...``: the benchmark suite of a source checkout (``benchmarks/run_all.py``).
 
 User mistakes end with a one-line ``isoflow: error: ...`` on stderr and a non-zero exit status
 (2 for a bad command line, 1 otherwise), never a traceback. Set ``ISOFLOW_DEBUG=1`` to see the
-traceback of an error anyway.
+traceback of an error anyway. Modules beyond the numerical core (HDF5, matplotlib, numba) are
+imported only by the commands that use them, after the command line has been parsed.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import subprocess
 import sys
 import time
 import tomllib
@@ -27,10 +33,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from . import __version__
+from . import registry
 from ._errors import IsoflowError
+from ._version import __version__
 
 __all__ = ["main"]
 
@@ -39,12 +44,15 @@ class UserError(IsoflowError):
     """A mistake on the command line or in a configuration file."""
 
 
+# ---- argument types ----------------------------------------------------------------------------
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not np.isfinite(value) or value <= 0:
+    if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"must be positive and finite: {text!r}")
     return value
 
@@ -54,7 +62,7 @@ def _finite_float(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not np.isfinite(value):
+    if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"must be finite: {text!r}")
     return value
 
@@ -69,22 +77,46 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _model_param_flags() -> dict[str, str]:
-    """Command-line flag -> model parameter name, for every registered model's parameters."""
-    from .registry import MODELS
+def _anderson(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= value <= registry.ANDERSON_MAX:
+        raise argparse.ArgumentTypeError(f"must be in 0..{registry.ANDERSON_MAX}: {text!r}")
+    return value
 
+
+def _numbers(text: str) -> list[int]:
+    try:
+        values = [int(k) for k in text.split(",") if k.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"not a comma-separated list of benchmark numbers: {text!r}"
+        ) from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"no benchmark numbers in {text!r}")
+    return values
+
+
+def _model_param_flags() -> dict[str, str]:
+    """Command-line flag -> model parameter name, for every built-in model's parameters."""
     flags: dict[str, str] = {}
-    for spec in MODELS.values():
-        for name in spec.params:
+    for spec in registry.MODELS.values():
+        for name in spec.params or {}:
             flag = "--vortex-config" if name == "config" else f"--{name.replace('_', '-')}"
             flags[flag] = name
     return flags
 
 
-def _build_parser() -> argparse.ArgumentParser:
-    from .experiments import EXPERIMENTS
-    from .registry import METHODS, MODELS, SOLVERS
+#: Options of ``run`` that describe a new run (not taken by ``--resume``).
+_RUN_OPTIONS = ("method", "solver", "rtol", "anderson", "t0", "t1", "dt", "n_steps", "save_every")
 
+
+# ---- the parser --------------------------------------------------------------------------------
+
+
+def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="isoflow",
         description="Structure-preserving integration of isospectral flows (IsoMP).",
@@ -103,14 +135,15 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
+    solvers = ", ".join(registry.SOLVERS)
 
     demo = sub.add_parser(
         "demo",
         help="integrate the paper's so(n) rigid body and print invariant drifts",
         description=(
-            "Generalized rigid body on so(n) (paper, Sec. 3.1, with the symmetrized inertia of "
-            "NOTES.md), integrated by IsoMP. Prints the drift of the Casimirs (eigenvalues), of "
-            "the Hamiltonian and of the distance to so(n)."
+            "Generalized rigid body on so(n) (paper, Sec. 3.1, with the symmetrized inertia), "
+            "integrated by IsoMP. Prints the drift of the Casimirs (eigenvalues), of the "
+            "Hamiltonian and of the distance to so(n)."
         ),
     )
     demo.add_argument("--n", type=_positive_int, default=10, help="matrix size (default 10)")
@@ -118,31 +151,46 @@ def _build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--t1", type=_positive_float, default=100.0, help="final time (default 100)")
     demo.add_argument(
         "--solver",
-        choices=("fixed-point", "newton", "newton-krylov"),
+        choices=tuple(registry.SOLVERS),
         default="fixed-point",
         help="nonlinear solver for the stage (default fixed-point)",
     )
+    demo.add_argument(
+        "--anderson", type=_anderson, default=0, metavar="M", help="Anderson memory (0: plain)"
+    )
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
-    demo.set_defaults(func=_demo)
+    demo.set_defaults(func=_demo, computes=True)
 
-    models_help = "; ".join(f"{k}: {v.description}" for k, v in MODELS.items())
+    models_help = "; ".join(f"{k}: {v.description}" for k, v in registry.MODELS.items())
     run = sub.add_parser(
         "run",
         help="integrate a model and stream the states to an HDF5 result file",
         description=(
-            "Integrate a registered model with a fixed step and stream the saved states, their "
-            "invariants and checkpoints to HDF5. Options override values of --config. "
-            f"Models: {models_help}."
+            "Integrate a model with a fixed step and stream the saved states, their invariants "
+            "and checkpoints to HDF5. Options override values of --config. Built-in models: "
+            f"{models_help}. Your own: --model package.module:factory (a function returning "
+            "(problem, initial_state), its keyword arguments from --param KEY=VALUE or the "
+            "TOML [params] table), or the name a package registers under the entry-point group "
+            f"{registry.ENTRY_POINT_GROUP}."
         ),
     )
-    run.add_argument("model", nargs="?", help=f"one of: {', '.join(MODELS)}")
+    run.add_argument("model", nargs="?", help=f"one of: {', '.join(registry.MODELS)}")
+    run.add_argument(
+        "--model",
+        dest="model_option",
+        metavar="SPEC",
+        help="the model by name or as package.module:factory (needed to resume such a run)",
+    )
     run.add_argument("--config", metavar="TOML", help="read the run from a TOML file")
     run.add_argument("--resume", metavar="FILE", help="continue a stopped or killed run")
     run.add_argument("--out", metavar="FILE", help="result file (HDF5) to write")
     run.add_argument("--force", action="store_true", help="overwrite an existing --out file")
-    run.add_argument("--method", help=f"one of: {', '.join(METHODS)} (default isomp)")
-    run.add_argument("--solver", help=f"one of: {', '.join(SOLVERS)} (default fixed-point)")
+    run.add_argument("--method", help="a method of 'isoflow list methods' (default isomp)")
+    run.add_argument("--solver", help=f"one of: {solvers} (default fixed-point)")
     run.add_argument("--rtol", type=_positive_float, help="nonlinear solver tolerance")
+    run.add_argument(
+        "--anderson", type=_anderson, metavar="M", help="Anderson memory of the fixed point"
+    )
     run.add_argument("--t0", type=_finite_float, help="start time (default 0)")
     run.add_argument("--t1", type=_finite_float, help="final time")
     run.add_argument("--dt", type=_positive_float, help="step size")
@@ -159,7 +207,7 @@ def _build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="any model parameter (repeatable)",
+        help="any model parameter (repeatable; VALUE read as a TOML value)",
     )
     run.add_argument(
         "--chunk-rows", type=_positive_int, default=256, help="states per write (default 256)"
@@ -171,77 +219,127 @@ def _build_parser() -> argparse.ArgumentParser:
         help="write at least this often (default 1 s)",
     )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
-    run.set_defaults(func=_run)
+    run.set_defaults(func=_run, computes=True)
 
     info = sub.add_parser("info", help="describe a result file: parameters and invariant drifts")
     info.add_argument("file", help="an isoflow result file (HDF5)")
     info.add_argument("--json", action="store_true", help="print JSON")
-    info.set_defaults(func=_info)
+    info.set_defaults(func=_info, computes=False)
 
     plot = sub.add_parser("plot", help="plot invariants and states from a result file")
     plot.add_argument("file", help="an isoflow result file (HDF5)")
     plot.add_argument("--out", required=True, help="image file (.png, .pdf, .svg)")
-    plot.set_defaults(func=_plot)
+    plot.add_argument("--force", action="store_true", help="replace an existing --out file")
+    plot.set_defaults(func=_plot, computes=False)
 
+    experiments = tuple(registry.EXPERIMENTS)
     rep = sub.add_parser(
         "reproduce",
         help="run the paper's experiments: figures and JSON summaries",
         description=(
             "Run experiments of the paper (Section 3, corrected conventions) and write a PNG and "
-            "a PDF figure and a JSON summary for each. Experiments: " + ", ".join(EXPERIMENTS)
+            "a PDF figure and a JSON summary for each (replacing those of an earlier run). "
+            "Experiments: " + ", ".join(experiments)
         ),
     )
     rep.add_argument(
         "experiment",
-        choices=("all", *EXPERIMENTS),
+        choices=("all", *experiments),
         metavar="EXPERIMENT",
-        help="'all' or one of: " + ", ".join(EXPERIMENTS),
+        help="'all' or one of: " + ", ".join(experiments),
     )
     rep.add_argument("--out", default="results", help="output directory (default results/)")
     rep.add_argument("--quick", action="store_true", help="reduced versions (CI, a first look)")
     rep.add_argument("--no-pdf", action="store_true", help="PNG only")
     rep.add_argument("--quiet", action="store_true", help="no progress bars")
-    rep.set_defaults(func=_reproduce)
+    rep.set_defaults(func=_reproduce, computes=True)
+
+    lst = sub.add_parser(
+        "list", help="the models, methods, solvers and experiments, by the names to use"
+    )
+    lst.add_argument(
+        "what",
+        nargs="?",
+        choices=("models", "methods", "solvers", "experiments"),
+        help="one kind only (default: all)",
+    )
+    lst.set_defaults(func=_list, computes=False)
 
     bench = sub.add_parser(
         "bench",
-        help="run the benchmark suite (speed as ratios to baselines; JSON + table)",
-        description="Run benchmarks/ 1-7; see 'isoflow bench --help' for its options.",
-        add_help=False,
+        help="run the benchmark suite of a source checkout (ratios to baselines; JSON + table)",
+        description=(
+            "Run benchmarks/run_all.py of the source tree this isoflow is installed from "
+            "(pip install -e .). The benchmarks are not part of the installed package."
+        ),
     )
-    bench.add_argument("bench_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
-    bench.set_defaults(func=_bench)
+    bench.add_argument("--out", default="benchmark-results", help="output directory")
+    bench.add_argument("--quick", action="store_true", help="smaller sizes (about a minute)")
+    bench.add_argument(
+        "--only", type=_numbers, metavar="K,...", help="benchmark numbers (default: all)"
+    )
+    bench.add_argument("--figure", metavar="PNG", help="write the spin-chain-cost figure here")
+    bench.set_defaults(func=_bench, computes=False)
     return parser
 
 
-# --- demo ---------------------------------------------------------------------------------------
+# ---- shared ------------------------------------------------------------------------------------
+
+
+def _announce_compiles() -> None:
+    """Say on stderr when a run compiles its loops, and how long that took."""
+    from ._compiled import notice
+
+    notice.SHOW = True
+
+
+def _progress(args: argparse.Namespace) -> bool | None:
+    return False if args.quiet else None
+
+
+def _summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
+    d = sol.diagnostics.summary() if sol.diagnostics is not None else {}
+    st = sol.stats
+    lines = [
+        title,
+        f"  {'steps':<24} {st.n_steps} of {sol.n_steps}",
+        f"  {'wall time':<24} {st.wall_time:.2f} s"
+        + (f" (compiling {st.compile_time:.1f} s)" if st.compile_time > 0.5 else ""),
+        f"  {'runner':<24} {st.runner}",
+        f"  {'iterations per step':<24} mean {st.iterations_mean:.2f}, max {st.iterations_max}",
+        *(f"  {k:<24} {v:.3e}" for k, v in d.items()),
+        f"  {'status':<24} {sol.message}",
+    ]
+    if path is not None:
+        lines.append(f"  {'file':<24} {path}")
+    return lines
+
+
+# ---- demo --------------------------------------------------------------------------------------
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from . import FixedPoint, IsoMP, Newton, solve
-    from .models import rigid_body
+    from ._solve import solve
 
-    solver = {
-        "fixed-point": FixedPoint(),
-        "newton": Newton(),
-        "newton-krylov": Newton(jacobian="krylov"),
-    }[args.solver]
-    problem, W0 = rigid_body(n=args.n)
+    config = {
+        "model": "rigid-body",
+        "params": {"n": args.n},
+        "method": "isomp",
+        "solver": args.solver,
+        "anderson": args.anderson,
+        "dt": args.dt,
+        "t1": args.t1,
+        "save_every": max(1, round(1.0 / args.dt)),
+    }
+    problem, W0, method, kwargs = registry.build(config)
+    _announce_compiles()
     # one step first, so that loading the compiled kernels is not counted as stepping
-    solve(problem, IsoMP(solver=solver), W0, dt=args.dt, n_steps=1, progress=False)
+    solve(problem, method, W0, dt=args.dt, n_steps=1, progress=False)
     start = time.perf_counter()
-    sol = solve(
-        problem,
-        IsoMP(solver=solver),
-        W0,
-        dt=args.dt,
-        t1=args.t1,
-        save_every=max(1, round(1.0 / args.dt)),
-        progress=False if args.quiet else None,
-    )
+    sol = solve(problem, method, W0, **kwargs, progress=_progress(args))
     wall = time.perf_counter() - start
-    assert sol.diagnostics is not None
-    d = sol.diagnostics.summary()
+    d = sol.diagnostics.summary() if sol.diagnostics is not None else {}
+    solver = args.solver + (f", Anderson {args.anderson}" if args.anderson else "")
     rows = [
         ("steps", f"{sol.stats.n_steps}"),
         (
@@ -262,14 +360,14 @@ def _demo(args: argparse.Namespace) -> int:
     ]
     lines = [
         f"isoflow {__version__} demo: generalized rigid body on so({args.n}), IsoMP "
-        f"({args.solver}), h = {args.dt:g}, T = {args.t1:g}",
+        f"({solver}), h = {args.dt:g}, T = {args.t1:g}",
         *(f"  {name:<22} {value}" for name, value in rows),
     ]
     print("\n".join(lines))
     return 0 if sol.success else 1
 
 
-# --- run ----------------------------------------------------------------------------------------
+# ---- run ---------------------------------------------------------------------------------------
 
 
 def _read_toml(path: str) -> dict[str, Any]:
@@ -285,16 +383,46 @@ def _read_toml(path: str) -> dict[str, Any]:
         raise UserError(f"{p}: cannot read configuration: {exc}") from None
 
 
-def _run_config(args: argparse.Namespace) -> tuple[dict[str, Any], str | None]:
-    """The run configuration (registry form) and the output path, from TOML and options."""
-    cfg: dict[str, Any] = _read_toml(args.config) if args.config else {}
-    out = cfg.pop("out", None)
-    params = dict(cfg.get("params") or {})
-    if args.model:
-        if cfg.get("model") and cfg["model"] != args.model:
-            params = {}  # the TOML's parameters belong to another model
-        cfg["model"] = args.model
-    for key in ("method", "solver", "rtol", "t0", "t1", "dt", "n_steps", "save_every"):
+def _model_name(args: argparse.Namespace) -> str | None:
+    if args.model and args.model_option and args.model != args.model_option:
+        raise UserError(f"two models given: {args.model!r} and --model {args.model_option!r}")
+    return args.model or args.model_option  # type: ignore[no-any-return]
+
+
+def _cli_params(args: argparse.Namespace, spec: registry.ModelSpec) -> dict[str, Any]:
+    """Model parameters given as options (``--n 6``, ``--param k=v``), converted."""
+    params: dict[str, Any] = {}
+    for key, value in vars(args).items():
+        if key.startswith("param_") and value is not None:
+            name = key[len("param_") :]
+            params[name] = registry.parse_param(spec, name, value)
+    for item in args.param:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UserError(f"--param expects KEY=VALUE, got {item!r}")
+        params[key.strip()] = registry.parse_param(spec, key.strip(), value.strip())
+    return params
+
+
+def _run_config(args: argparse.Namespace) -> tuple[registry.ModelSpec, dict[str, Any], str | None]:
+    """The model, the run configuration (normalized) and the output path."""
+    table = _read_toml(args.config) if args.config else {}
+    cfg, out = registry.config_from_toml(table)
+    name = _model_name(args)
+    if name is not None:
+        if cfg.get("model") not in (None, name):
+            cfg.pop("params", None)  # the TOML's parameters belong to another model
+        cfg["model"] = name
+    if not cfg.get("model"):
+        raise UserError("name a model (isoflow run MODEL ...) or give --config run.toml")
+    spec = registry.load_model(cfg["model"])  # the user named it: this may import their module
+    cli_params = _cli_params(args, spec)
+    if cli_params:
+        given = cfg.get("params") or {}
+        if not isinstance(given, dict):
+            raise registry.ConfigError(f"params must be a table of model parameters, got {given!r}")
+        cfg["params"] = given | cli_params
+    for key in _RUN_OPTIONS:
         value = getattr(args, key)
         if value is not None:
             cfg[key] = value
@@ -302,68 +430,72 @@ def _run_config(args: argparse.Namespace) -> tuple[dict[str, Any], str | None]:
         for k in ("t1", "dt", "n_steps"):  # two options replace the file's choice of two
             if getattr(args, k) is None:
                 cfg.pop(k, None)
-    for key, value in vars(args).items():
-        if key.startswith("param_") and value is not None:
-            params[key[len("param_") :]] = value
-    for item in args.param:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise UserError(f"--param expects KEY=VALUE, got {item!r}")
-        params[key.strip()] = value.strip()
-    cfg["params"] = params
-    if args.out:
-        out = args.out
-    return cfg, out
+    cfg["model"] = spec.name
+    return spec, registry.normalize_config(cfg, model=spec), args.out or out
 
 
-def _summary_lines(title: str, sol: Any, path: str) -> list[str]:
-    d = sol.diagnostics.summary() if sol.diagnostics is not None else {}
-    lines = [
-        title,
-        f"  {'steps':<24} {sol.stats.n_steps} of {sol.n_steps}",
-        f"  {'wall time':<24} {sol.stats.wall_time:.2f} s",
-        *(f"  {k:<24} {v:.3e}" for k, v in d.items()),
-        f"  {'status':<24} {sol.message}",
-        f"  {'file':<24} {path}",
-    ]
-    return lines
+def _resume(args: argparse.Namespace) -> int:
+    from . import io
+
+    extra = [k for k in ("config", "out", *_RUN_OPTIONS) if getattr(args, k) not in (None, False)]
+    extra += [k for k in vars(args) if k.startswith("param_") and getattr(args, k) is not None]
+    if args.force:
+        extra.append("force")
+    if extra:
+        flags = ", ".join("--" + k.removeprefix("param_").replace("_", "-") for k in extra)
+        raise UserError(
+            f"--resume continues the run the file records; {flags} cannot change it "
+            "(only --model and --param, to name your model again)"
+        )
+    common = {
+        "progress": _progress(args),
+        "throw": False,
+        "chunk_rows": args.chunk_rows,
+        "flush_seconds": args.flush_seconds,
+    }
+    name = _model_name(args)
+    if name is None:
+        if args.param:
+            raise UserError("--param on --resume needs the model too (--model SPEC)")
+        _announce_compiles()
+        sol = io.resume(args.resume, **common)
+    else:
+        data = io.info(args.resume)
+        spec = registry.load_model(name)
+        cfg = registry.check_recorded_model(data["config"], spec, _cli_params(args, spec))
+        problem, y0, method, _kw = registry.build(cfg, model=spec)
+        registry.check_recorded_state(data["meta"], problem, y0)
+        _announce_compiles()
+        sol = io.resume(args.resume, problem=problem, method=method, **common)
+    print("\n".join(_summary_lines(f"resumed {args.resume}", sol, args.resume)))
+    return 0 if sol.success else 1
 
 
 def _run(args: argparse.Namespace) -> int:
-    from . import io, solve
-    from .registry import build, normalize_config
-
-    progress = False if args.quiet else None
     if args.resume:
-        if args.model or args.config:
-            raise UserError("--resume takes the run from the file; give no model or --config")
-        sol = io.resume(
-            args.resume,
-            progress=progress,
-            throw=False,
-            chunk_rows=args.chunk_rows,
-            flush_seconds=args.flush_seconds,
-        )
-        print("\n".join(_summary_lines(f"resumed {args.resume}", sol, args.resume)))
-        return 0 if sol.success else 1
-    if not args.model and not args.config:
-        raise UserError("name a model (isoflow run MODEL ...) or give --config run.toml")
-    cfg, out = _run_config(args)
-    cfg = normalize_config(cfg)
+        return _resume(args)
+    from . import io
+    from ._solve import solve
+
+    spec, cfg, out = _run_config(args)
     if not out:
         raise UserError("give the result file with --out FILE (or out = ... in the TOML)")
-    if Path(out).exists() and not args.force:
+    target = Path(out)
+    if target.exists() and not target.is_file():
+        raise UserError(f"{out} exists and is not a regular file; not replacing it")
+    if target.exists() and not args.force:
         raise UserError(f"{out} exists (use --force to overwrite, or --resume {out} to continue)")
-    problem, y0, method, kwargs = build(cfg)
+    problem, y0, method, kwargs = registry.build(cfg, model=spec)
     writer = io.HDF5Writer(out, cfg, chunk_rows=args.chunk_rows, flush_seconds=args.flush_seconds)
-    sol = solve(problem, method, y0, **kwargs, progress=progress, throw=False, writer=writer)
+    _announce_compiles()
+    sol = solve(problem, method, y0, **kwargs, progress=_progress(args), throw=False, writer=writer)
     params = ", ".join(f"{k} = {v}" for k, v in cfg["params"].items())
     title = f"isoflow {__version__} run: {cfg['model']} ({params}), {method.name}"
     print("\n".join(_summary_lines(title, sol, out)))
     return 0 if sol.success else 1
 
 
-# --- info / plot ---------------------------------------------------------------------------------
+# ---- info / plot -------------------------------------------------------------------------------
 
 
 def _info(args: argparse.Namespace) -> int:
@@ -380,12 +512,14 @@ def _info(args: argparse.Namespace) -> int:
         state = "incomplete: stopped without closing (killed?); resume with isoflow run --resume"
     else:
         state = f"incomplete: {run_info.get('message', '')}"
+    model = str(cfg.get("model", "(not registered)"))
+    if "model" in cfg and model not in registry.MODELS:
+        model += f" (not built in: resume with --model {model})"
     lines = [
         f"{data['path']}: isoflow result file (written by isoflow {data['isoflow_version']}, "
         f"{data['created']})",
-        f"  {'model':<24} {cfg.get('model', '(not registered)')} "
-        + json.dumps(cfg.get("params", {})),
-        f"  {'method':<24} {meta.get('method')} (solver {cfg.get('solver', '?')})",
+        f"  {'model':<24} {model} " + json.dumps(cfg.get("params", {})),
+        f"  {'method':<24} {meta.get('method')} (solver {cfg.get('solver') or 'none'})",
         f"  {'algebra':<24} {meta.get('algebra')}, state shape {tuple(meta.get('state_shape'))}",
         f"  {'time grid':<24} t0 = {meta.get('t0'):g}, dt = {meta.get('dt'):g}, "
         f"{meta.get('n_steps')} steps, save every {meta.get('save_every')}",
@@ -408,50 +542,91 @@ def _plot(args: argparse.Namespace) -> int:
 
     run = io.load(args.file)
     fig = plotting.plot_run(run)
-    plotting.save(fig, args.out)
+    plotting.save(fig, args.out, force=args.force)
     print(f"wrote {args.out}")
     return 0
 
 
-# --- reproduce ----------------------------------------------------------------------------------
+# ---- reproduce / list --------------------------------------------------------------------------
 
 
 def _reproduce(args: argparse.Namespace) -> int:
-    from .experiments import EXPERIMENTS, run_experiment
+    from .experiments import run_experiment
 
-    names = list(EXPERIMENTS) if args.experiment == "all" else [args.experiment]
+    names = list(registry.EXPERIMENTS) if args.experiment == "all" else [args.experiment]
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"cannot create output directory {out}: {exc.strerror}") from None
+    _announce_compiles()
     start = time.perf_counter()
     for name in names:
         t = time.perf_counter()
         files = run_experiment(
-            name, out, quick=args.quick, pdf=not args.no_pdf, progress=False if args.quiet else None
+            name, out, quick=args.quick, pdf=not args.no_pdf, progress=_progress(args)
         )
         print(f"{name:<24} {time.perf_counter() - t:7.1f} s  " + " ".join(str(f) for f in files))
     print(f"{'total':<24} {time.perf_counter() - start:7.1f} s")
     return 0
 
 
-def _bench(args: argparse.Namespace) -> int:
-    from .benchmarking import main as bench_main
+def _list(args: argparse.Namespace) -> int:
+    kinds = [args.what] if args.what else ["models", "methods", "solvers", "experiments"]
+    lines: list[str] = []
+    for kind in kinds:
+        lines.append(f"{kind}:")
+        for name, text, params in registry.describe(kind):
+            lines.append(f"  {name:<34} {text}")
+            lines += [f"  {'':<34}   {p}" for p in params]
+    if "models" in kinds:
+        lines.append(
+            "  (your own: --model package.module:factory; packages register models under the "
+            f"entry-point group {registry.ENTRY_POINT_GROUP})"
+        )
+    print("\n".join(lines))
+    return 0
 
-    return int(bench_main(list(args.bench_args)))
+
+# ---- bench -------------------------------------------------------------------------------------
+
+
+def _source_tree() -> Path | None:
+    """The repository this isoflow is installed from (an editable install), if any."""
+    root = Path(__file__).resolve().parents[2]
+    if (root / "benchmarks" / "run_all.py").is_file() and (root / "pyproject.toml").is_file():
+        return root
+    return None
+
+
+def _bench(args: argparse.Namespace) -> int:
+    root = _source_tree()
+    if root is None:
+        raise UserError(
+            "the benchmarks live in the source repository, not in the installed package: clone "
+            "it, install it with pip install -e . and run isoflow bench (or python "
+            "benchmarks/run_all.py) there"
+        )
+    cmd = [sys.executable, str(root / "benchmarks" / "run_all.py"), "--out", args.out]
+    if args.quick:
+        cmd.append("--quick")
+    if args.only:
+        cmd += ["--only", ",".join(map(str, args.only))]
+    if args.figure:
+        cmd += ["--figure", args.figure]
+    return subprocess.run(cmd, check=False).returncode
+
+
+# ---- entry point -------------------------------------------------------------------------------
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``isoflow`` command; returns the exit status."""
-    words = list(sys.argv[1:] if argv is None else argv)
-    if words[:1] == ["bench"]:  # its own options, parsed by isoflow.benchmarking
-        from .benchmarking import main as bench_main
-
-        return int(bench_main(words[1:]))
     parser = _build_parser()
-    args = parser.parse_args(words)
+    args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
+        if not args.computes:
+            return int(args.func(args))
         from .threads import thread_limits
 
         with thread_limits(blas=args.blas_threads or 1):

@@ -1,0 +1,151 @@
+"""The command line: registry names everywhere, configuration mistakes, plot, list, bench."""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+from cli_helpers import one_error_line, run_cli
+from isoflow import cli, registry
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def toml_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("toml")
+    head = 'model = "rigid-body"\ndt = 0.1\nn_steps = 5\nout = "x.h5"\n'
+    cases = {
+        "params3": head + "params = 3\n",
+        "out7": 'model = "rigid-body"\ndt = 0.1\nn_steps = 5\nout = 7\n',
+        "dtstring": 'model = "rigid-body"\ndt = "0.1"\nn_steps = 5\nout = "x.h5"\n',
+        "rk4newton": head + 'method = "rk4"\nsolver = "newton"\n',
+        "huge": head + "[params]\nn = 100000\n",
+        "datetime": head + "[params]\nn = 1979-05-27\n",
+        "anderson": head + 'solver = "newton-krylov"\nanderson = 3\n',
+    }
+    for name, text in cases.items():
+        (d / f"{name}.toml").write_text(text)
+    return d
+
+
+@pytest.mark.parametrize(
+    ("name", "pattern"),
+    [
+        ("params3", r"params must be a table of model parameters, got 3"),
+        ("out7", r"out must be a file name \(a string\), got 7"),
+        ("dtstring", r"dt must be a number, got '0.1'"),
+        ("rk4newton", r"method 'rk4' is explicit: it takes no nonlinear solver"),
+        ("huge", r"rigid-body n must be <= 2048, got 100000"),
+        ("datetime", r"rigid-body n must be an integer"),
+        ("anderson", r"anderson = 3 is an option of the fixed-point solver"),
+    ],
+)
+def test_toml_mistakes_are_one_line_errors(toml_dir: Path, name: str, pattern: str) -> None:
+    res = run_cli("run", "--config", f"{name}.toml", "--quiet", cwd=toml_dir)
+    assert res.returncode == 1, res.stderr
+    assert re.search(pattern, one_error_line(res.stderr)), res.stderr
+    assert not (toml_dir / "x.h5").exists()
+
+
+def test_run_with_anderson_and_an_old_spelling(tmp_path: Path) -> None:
+    res = run_cli("run", "heisenberg-chain", "--N", "8", "--dt", "0.1", "--n-steps", "20",
+                  "--anderson", "2", "--out", "a.h5", "--quiet", cwd=tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    from isoflow import io
+
+    run = io.load(tmp_path / "a.h5")
+    assert run.config["model"] == "spin-chain" and run.config["anderson"] == 2
+
+
+def test_plot_does_not_replace_files_silently(tmp_path: Path) -> None:
+    res = run_cli("run", "rigid-body", "--n", "3", "--dt", "0.1", "--n-steps", "10", "--out",
+                  "r.h5", "--quiet", cwd=tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    png = tmp_path / "r.png"
+    png.write_bytes(b"mine")
+    res = run_cli("plot", "r.h5", "--out", "r.png", cwd=tmp_path)
+    assert res.returncode == 1 and "r.png exists (use --force" in one_error_line(res.stderr)
+    assert png.read_bytes() == b"mine"
+    res = run_cli("plot", "r.h5", "--out", "r.png", "--force", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    (tmp_path / "d.png").mkdir()
+    res = run_cli("plot", "r.h5", "--out", "d.png", "--force", cwd=tmp_path)
+    assert res.returncode == 1 and "not a regular file" in one_error_line(res.stderr)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.png", "r.h5", "r.png"]  # no temp
+
+
+def test_list_shows_the_registry(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["list"]) == 0
+    out = capsys.readouterr().out
+    for names in (registry.MODELS, registry.METHODS, registry.SOLVERS, registry.EXPERIMENTS):
+        for name in names:
+            assert re.search(rf"^  {re.escape(name)}\s", out, re.M), name
+    assert "rigid-body" in out and "n (int, default 10)" in out and "at most 2048" in out
+
+
+def test_parser_names_come_from_the_registry() -> None:
+    parser = cli._build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command").choices
+    demo_solver = next(a for a in sub["demo"]._actions if a.dest == "solver")
+    assert tuple(demo_solver.choices) == tuple(registry.SOLVERS)
+    rep = next(a for a in sub["reproduce"]._actions if a.dest == "experiment")
+    assert tuple(rep.choices) == ("all", *registry.EXPERIMENTS)
+
+
+@pytest.mark.parametrize(
+    ("args", "pattern"),
+    [
+        (["--only", "x"], r"not a comma-separated list of benchmark numbers: 'x'"),
+        (["--only", "9"], r"no benchmark 9 \(benchmarks: 1, 2, 3, 4, 5, 6, 7"),
+        (["--only", "1,99"], r"no benchmark 99"),
+    ],
+)
+def test_bench_mistakes_are_one_line_errors(args: list[str], pattern: str) -> None:
+    res = run_cli("bench", *args)
+    assert res.returncode == 2, res.stderr
+    assert re.search(pattern, one_error_line(res.stderr)), res.stderr
+
+
+def test_bench_without_a_source_tree(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(cli, "_source_tree", lambda: None)
+    assert cli.main(["bench", "--quick"]) == 1
+    err = capsys.readouterr().err
+    assert "isoflow: error: the benchmarks live in the source repository" in err
+    assert "pip install -e ." in err
+
+
+def test_bench_runs_a_benchmark_of_the_suite(tmp_path: Path) -> None:
+    """Benchmark 6 counts iterations (no timing): the suite runs on the current API."""
+    out = tmp_path / "bench"
+    res = run_cli("bench", "--quick", "--only", "6", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    report = json.loads((out / "benchmarks.json").read_text())
+    rows = report["results"]
+    assert {r["id"] for r in rows} == {6} and len(rows) == 4
+    rigid = [r for r in rows if "rigid" in r["name"]]
+    assert all(r["iterations_default"] < r["iterations_paper_X0_eq_W"] for r in rigid)
+    assert all(r["max_difference_of_answers"] <= 1e-13 for r in rigid)
+    assert "| 6 |" in (out / "benchmarks.md").read_text()
+
+
+def test_every_benchmark_is_registered_once() -> None:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import suite
+
+        benchmarks = suite.load()
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    assert list(benchmarks) == [1, 2, 3, 4, 5, 6, 7]
+    files = sorted(p.stem for p in (ROOT / "benchmarks").glob("bench_*.py"))
+    assert sorted(b.source for b in benchmarks.values()) == files
+    for k, b in benchmarks.items():
+        assert b.source.startswith(f"bench_{k}_") and b.title

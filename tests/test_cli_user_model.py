@@ -1,0 +1,116 @@
+"""``isoflow run --model package.module:factory`` and entry-point models: run, stream, resume."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import re
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli_helpers import isoflow_cmd, kill_when, one_error_line, run_cli, user_env
+from isoflow import cli, io, registry
+
+TOY = "user_models:toy_rigid_body"
+ARGS = ["--dt", "0.01", "--n-steps", "20000", "--save-every", "3", "--chunk-rows", "16",
+        "--flush-seconds", "0.05", "--quiet"]  # fmt: skip
+
+
+def test_user_model_streams_and_resumes_bit_for_bit_when_named_again(tmp_path: Path) -> None:
+    env = user_env()
+    model = ["run", "--model", TOY, "--param", "n=4", "--param", "scale=0.5"]
+    full = run_cli(*model, *ARGS, "--out", "full.h5", cwd=tmp_path, env=env)
+    assert full.returncode == 0, full.stderr
+    assert "runner                   NumPy" in full.stdout and "20000 of 20000" in full.stdout
+    ref = io.load(tmp_path / "full.h5")
+    assert ref.complete and len(ref.ys) == 6668
+    assert ref.config["model"] == TOY and ref.config["params"] == {"n": 4, "scale": 0.5}
+
+    path = tmp_path / "killed.h5"
+    proc = subprocess.Popen(
+        isoflow_cmd(*model, *ARGS, "--out", str(path)), stderr=subprocess.DEVNULL, env=env,
+        cwd=tmp_path,
+    )  # fmt: skip
+    kill_when(path, 300, proc)
+    info = run_cli("info", str(path), env=env)
+    assert info.returncode == 0 and f"not built in: resume with --model {TOY}" in info.stdout
+
+    # the file alone imports nothing: the model must be named again, and match the record
+    for args, pattern in [
+        ([], rf"not built in.*--resume FILE --model {TOY}"),
+        (["--model", "user_models:compiled_toy"], rf"written by model '{TOY}', not"),
+        (["--model", TOY, "--param", "n=5"], r"parameter n = 5 differs from the run's n = 4"),
+        (["--model", TOY, "--dt", "0.02"], r"--dt cannot change it"),
+        (["--model", TOY, "--out", "x.h5"], r"--out cannot change it"),
+        (["--param", "n=4"], r"--param on --resume needs the model"),
+    ]:
+        res = run_cli("run", "--resume", str(path), *args, env=env)
+        assert res.returncode == 1, (args, res.stderr)
+        assert re.search(pattern, one_error_line(res.stderr)), (args, res.stderr)
+
+    res = run_cli("run", "--resume", str(path), "--model", TOY, "--param", "n=4", "--quiet",
+                  env=env)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    got = io.load(path)
+    assert got.complete and got.run_info["status"] == 0
+    assert got.ys.tobytes() == ref.ys.tobytes() and np.array_equal(got.ts, ref.ts)
+    assert got.drifts == ref.drifts
+
+
+def test_user_compiled_model_from_toml(tmp_path: Path) -> None:
+    (tmp_path / "run.toml").write_text(
+        'model = "user_models:compiled_toy"\ndt = 0.05\nn_steps = 40\nsave_every = 4\n'
+        'out = "c.h5"\n[params]\nn = 5\nseed = 2\n'
+    )
+    res = run_cli("run", "--config", "run.toml", "--quiet", cwd=tmp_path, env=user_env())
+    assert res.returncode == 0, res.stderr
+    assert "runner                   compiled" in res.stdout
+    run = io.load(tmp_path / "c.h5")
+    assert run.config["params"] == {"n": 5, "seed": 2} and len(run.ys) == 11
+    assert run.drifts["casimir_drift"] < 1e-13
+
+
+@pytest.mark.parametrize(
+    ("args", "pattern"),
+    [
+        (["--model", "no_such_module_xyz:f"], r"cannot import 'no_such_module_xyz'"),
+        (["--model", "user_models:missing"], r"has no attribute 'missing'"),
+        (["--model", "user_models:not_a_model"], r"must return \(problem, initial_state\)"),
+        (["--model", TOY, "--param", "colour=3"], r"unexpected keyword argument 'colour'"),
+        (["--model", TOY, "--param", "n"], r"--param expects KEY=VALUE"),
+        (["--model", "two:colons:here"], r"package.module:function"),
+        (["rigid-body", "--model", "spin-chain"], r"two models given"),
+    ],
+)
+def test_user_model_mistakes_are_one_line_errors(tmp_path: Path, args, pattern) -> None:
+    res = run_cli("run", *args, "--dt", "0.1", "--n-steps", "2", "--out", "x.h5", "--quiet",
+                  cwd=tmp_path, env=user_env())  # fmt: skip
+    assert res.returncode == 1, res.stderr
+    assert re.search(pattern, one_error_line(res.stderr)), res.stderr
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_entry_point_model_from_the_command_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from isoflow._compiled import notice
+
+    eps = [importlib.metadata.EntryPoint("toy", "user_models:TOY_SPEC", registry.ENTRY_POINT_GROUP)]
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda **kw: eps)
+    monkeypatch.setattr(notice, "SHOW", False)
+    out = str(tmp_path / "toy.h5")
+    args = ["run", "toy", "--param", "n=3", "--dt", "0.1", "--n-steps", "30", "--quiet"]
+    assert cli.main([*args, "--out", out]) == 0
+    assert notice.SHOW is True  # the command line announces compilations
+    assert "run: toy (n = 3, scale = 0.5, seed = 0)" in capsys.readouterr().out
+    assert io.load(out).config["params"] == {"n": 3, "scale": 0.5, "seed": 0}
+    assert cli.main(["run", "toy", "--param", "n=99", "--dt", "0.1", "--n-steps", "3",
+                     "--out", str(tmp_path / "big.h5")]) == 1  # fmt: skip
+    assert "toy n must be <= 64" in capsys.readouterr().err
+    assert cli.main(["run", "--resume", out]) == 1
+    assert "--model toy" in capsys.readouterr().err
+    assert cli.main(["run", "--resume", out, "--model", "toy", "--quiet"]) == 0
+    assert cli.main(["list", "models"]) == 0
+    assert "toy" in capsys.readouterr().out
