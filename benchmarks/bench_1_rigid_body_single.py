@@ -11,6 +11,7 @@ import sys
 from typing import Any
 
 import numpy as np
+
 from suite import StepTimer, benchmark, paired_best_times, record
 
 

@@ -14,6 +14,7 @@ import sys
 from typing import Any
 
 import numpy as np
+
 from suite import benchmark, record
 
 
