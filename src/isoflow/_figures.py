@@ -18,7 +18,15 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["DPI", "SUFFIXES", "floor", "new_figure", "plot_variation", "save"]
+__all__ = [
+    "DPI",
+    "SUFFIXES",
+    "floor",
+    "new_figure",
+    "plot_indexed_variations",
+    "plot_variation",
+    "save",
+]
 
 #: Resolution of the PNG files.
 DPI = 90
@@ -105,3 +113,11 @@ def plot_variation(
         for line, label in zip(lines, labels, strict=True):
             line.set_label(label)
         ax.legend(fontsize=7, ncol=legend_columns, loc="best", framealpha=0.7)
+
+
+def plot_indexed_variations(ax: Axes, x: Any, y: Any, *, ylabel: str, symbol: str) -> None:
+    """:func:`plot_variation` of the columns of ``y``, labelled ``symbol_1``, ``symbol_2``, ..."""
+    Y = np.asarray(y)
+    m = Y.shape[1] if Y.ndim > 1 else 1
+    plot_variation(ax, x, Y, lw=0.8, ylabel=ylabel, legend_columns=max(1, m // 2),
+                   labels=[rf"${symbol}_{{{j + 1}}}$" for j in range(m)])  # fmt: skip

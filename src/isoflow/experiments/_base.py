@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -71,6 +72,13 @@ class Experiment(ABC):
 
     def __repr__(self) -> str:
         return f"<experiment {self.name!r}: {self.description}>"
+
+    def _result(
+        self, data: dict[str, Any], summary: dict[str, Any], start: float
+    ) -> ExperimentResult:
+        """The result, with the wall time since ``start`` (``time.perf_counter()``) recorded."""
+        summary["wall_time"] = time.perf_counter() - start
+        return ExperimentResult(self.name, data, summary)
 
     def _check_result(self, result: ExperimentResult) -> None:
         if result.name != self.name:

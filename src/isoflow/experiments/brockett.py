@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import models, registry
-from .._figures import floor, new_figure, plot_variation
+from .._figures import floor, new_figure, plot_indexed_variations
 from .._solve import solve
 from ._base import Experiment, ExperimentResult, check, header
 
@@ -100,20 +100,15 @@ class Brockett(Experiment):
             "diagonal": final_diag,
             "eigenvalues": eig,
         }
-        summary["wall_time"] = time.perf_counter() - start
-        return ExperimentResult(self.name, data, summary)
+        return self._result(data, summary, start)
 
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)
         d, p = result.data, result.summary["parameters"]
         fig = new_figure(figsize=(7.5, 6))
         ax1, ax2 = fig.subplots(2, 1, sharex=True)
-        E = np.asarray(d["eigenvalue_variation"])
-        plot_variation(
-            ax1, d["ts"], E, lw=0.8, ylabel=r"$\lambda_j(t) - \lambda_j(0)$",
-            labels=[rf"$\lambda_{{{j + 1}}}$" for j in range(E.shape[1])],
-            legend_columns=max(1, E.shape[1] // 2),
-        )  # fmt: skip
+        plot_indexed_variations(ax1, d["ts"], d["eigenvalue_variation"], symbol=r"\lambda",
+                                ylabel=r"$\lambda_j(t) - \lambda_j(0)$")  # fmt: skip
         ax1.set_title("Casimirs: variation of the eigenvalues of $W$")
         ax2.semilogy(d["ts"], floor(d["off_diagonal"]), color="C3", label="off-diagonal part")
         ax2.set_title("W tends to a diagonal matrix")

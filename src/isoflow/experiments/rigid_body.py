@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import models, registry
-from .._figures import new_figure, plot_variation
+from .._figures import new_figure, plot_indexed_variations, plot_variation
 from .._solve import solve
 from ._base import Experiment, ExperimentResult, check, header
 
@@ -84,20 +84,15 @@ class RigidBody(Experiment):
             "hamiltonian_variation": d.hamiltonian - H0,
             "H0": H0,
         }
-        summary["wall_time"] = time.perf_counter() - start
-        return ExperimentResult(self.name, data, summary)
+        return self._result(data, summary, start)
 
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)
         d, p = result.data, result.summary["parameters"]
         fig = new_figure(figsize=(7.5, 6))
         ax1, ax2 = fig.subplots(2, 1, sharex=True)
-        C = np.asarray(d["casimir_variation"])
-        plot_variation(
-            ax1, d["ts"], C, lw=0.8, ylabel=r"$\lambda_j(t) - \lambda_j(0)$",
-            labels=[rf"$\lambda_{{{j + 1}}}$" for j in range(C.shape[1])],
-            legend_columns=max(1, C.shape[1] // 2),
-        )  # fmt: skip
+        plot_indexed_variations(ax1, d["ts"], d["casimir_variation"], symbol=r"\lambda",
+                                ylabel=r"$\lambda_j(t) - \lambda_j(0)$")  # fmt: skip
         ax1.set_title("Casimirs: variation of the eigenvalues of $iW$")
         plot_variation(ax2, d["ts"], d["hamiltonian_variation"], lw=0.8, color="C3",
                        ylabel=r"$H(t) - H(0)$", labels=["Hamiltonian"])  # fmt: skip

@@ -113,10 +113,7 @@ class SpinChainCost(Experiment):
                 ),
             },
         }
-        summary["wall_time"] = time.perf_counter() - start
-        return ExperimentResult(
-            self.name, {"Ns": Na, "time_per_step": times, "iterations": iters}, summary
-        )
+        return self._result({"Ns": Na, "time_per_step": times, "iterations": iters}, summary, start)
 
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)

@@ -83,8 +83,7 @@ class SpinChainEnergy(Experiment):
             "timings": timings,
             "checks": checks,
         }
-        summary["wall_time"] = time.perf_counter() - start
-        return ExperimentResult(self.name, {"ts": ts, "hamiltonian_variation": var}, summary)
+        return self._result({"ts": ts, "hamiltonian_variation": var}, summary, start)
 
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)

@@ -125,8 +125,7 @@ class SpinChainError(Experiment):
                 for k in METHODS
             },
         }
-        summary["wall_time"] = time.perf_counter() - start
-        return ExperimentResult(self.name, {"hs": hs, "errors": errors}, summary)
+        return self._result({"hs": hs, "errors": errors}, summary, start)
 
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)

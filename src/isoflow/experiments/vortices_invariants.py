@@ -64,8 +64,7 @@ class VorticesInvariants(Experiment):
             "runs": per_run,
             "checks": checks,
         }
-        summary["wall_time"] = time.perf_counter() - start
-        return ExperimentResult(self.name, {"runs": data_runs}, summary)
+        return self._result({"runs": data_runs}, summary, start)
 
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)
