@@ -149,3 +149,16 @@ def test_every_benchmark_is_registered_once() -> None:
     assert sorted(b.source for b in benchmarks.values()) == files
     for k, b in benchmarks.items():
         assert b.source.startswith(f"bench_{k}_") and b.title
+
+
+def test_a_closed_pipe_is_not_an_error() -> None:
+    import subprocess
+
+    from cli_helpers import isoflow_cmd
+
+    proc = subprocess.Popen(isoflow_cmd("list"), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # the reader is gone before the command writes (`isoflow list | true`)
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=60)
+    assert "error" not in err and "Traceback" not in err, err

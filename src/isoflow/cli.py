@@ -619,6 +619,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         with thread_limits(blas=args.blas_threads or 1):
             return int(args.func(args))
+    except BrokenPipeError:  # the reader went away (isoflow list | head): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
     except (IsoflowError, OSError, ValueError, TypeError) as exc:
         if os.environ.get("ISOFLOW_DEBUG"):
             raise
