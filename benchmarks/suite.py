@@ -91,17 +91,58 @@ def benchmark(
     return register
 
 
+#: Modules holding several benchmarks in a ``BENCHMARKS`` dict (number -> ``run(quick)``),
+#: their titles in the module docstring's numbered list (``8.  what against what``).
+GROUPED = ("design",)
+
+
+def _import(name: str, path: Path) -> Any:
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+def _numbered_titles(doc: str, width: int = 90) -> dict[int, str]:
+    """``{k: title}`` from the paragraphs ``k.  ...`` of a docstring (cut to ``width``)."""
+    paragraphs: dict[int, list[str]] = {}
+    current: list[str] | None = None
+    for line in doc.splitlines():
+        head, dot, rest = line.partition(".")
+        if dot and head.strip().isdigit() and rest.startswith(" "):
+            current = paragraphs.setdefault(int(head), [])
+            current.append(rest.strip())
+        elif current is not None and line.startswith("    ") and line.strip():
+            current.append(line.strip())
+        else:
+            current = None
+    titles = {}
+    for k, words in paragraphs.items():
+        text = " ".join(words).replace("``", "")
+        if len(text) > width:
+            text = text[: width - 1].rsplit(" ", 1)[0] + " ..."
+        titles[k] = text
+    return titles
+
+
 def load() -> dict[int, Benchmark]:
-    """Import every ``bench_*.py`` of this directory; returns :data:`BENCHMARKS` sorted."""
+    """Import every ``bench_*.py`` of this directory and the grouped modules; returns
+    :data:`BENCHMARKS` sorted by number."""
     if str(HERE) not in sys.path:
         sys.path.insert(0, str(HERE))
     for path in sorted(HERE.glob("bench_*.py")):
-        if path.stem not in sys.modules:
-            spec = importlib.util.spec_from_file_location(path.stem, path)
-            assert spec is not None and spec.loader is not None
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[path.stem] = module
-            spec.loader.exec_module(module)
+        _import(path.stem, path)
+    for name in GROUPED:
+        path = HERE / f"{name}.py"
+        if not path.is_file():
+            continue
+        module = _import(name, path)
+        titles = _numbered_titles(module.__doc__ or "")
+        for number, run in module.BENCHMARKS.items():
+            benchmark(number, titles.get(number, f"benchmark {number}"))(run)
     return dict(sorted(BENCHMARKS.items()))
 
 
