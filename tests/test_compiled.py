@@ -378,6 +378,20 @@ def _isolated_threaded_ensembles() -> None:
             assert r.parallel and numba.get_num_threads() > 1
             threaded = run_with(r, n, save_every)
         assert np.array_equal(serial.rows, threaded.rows), name
+    # a long chain cut into chunks over the threads (the threshold lowered for the test): the
+    # residual is summed chunk by chunk, so the agreement is to rounding, not bit for bit
+    import isoflow._compiled.runner as cr
+
+    cr.PARALLEL_MIN_SPINS = 1000
+    prob, w0 = _chain(N=3000)
+    with thread_limits(blas=1, numba=1):
+        serial = run_with(compiled_runner(prob, IsoMP(), w0, 0.1), 10, 2)
+    with thread_limits(blas=1):
+        r = compiled_runner(prob, IsoMP(), w0, 0.1)
+        assert "threaded" in r.label
+        threaded = run_with(r, 10, 2)
+    assert np.max(np.abs(serial.rows - threaded.rows)) <= 1e-13
+    assert abs(serial.iterations - threaded.iterations) <= 1
 
 
 def test_threaded_ensembles_equal_serial() -> None:

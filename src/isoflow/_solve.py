@@ -936,7 +936,7 @@ def _run(
         )
         for m in fails.failed
     }
-    common = {
+    common: dict[str, Any] = {
         "stats": stats,
         "success": status == RUN_FINISHED,
         "status": status,

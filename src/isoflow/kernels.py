@@ -171,7 +171,7 @@ class CompiledB(Kernel):
             raise TypeError(f"CompiledB: args must be a tuple, got {type(args).__name__}")
         self.f = f
         self.args = args
-        self.name = name or getattr(f, "__name__", "CompiledB")
+        self.name: str = name or str(getattr(f, "__name__", "CompiledB"))
 
     def field(self) -> tuple[Callable[..., None], tuple[Any, ...]]:
         return self.f, self.args

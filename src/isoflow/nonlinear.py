@@ -48,7 +48,6 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from ._errors import ParameterError
@@ -533,6 +532,8 @@ class Newton(NonlinearSolver):
             def matvec(v: Array, xi: Array = xi, gi: Array = gi, m: Array | None = sub_mask):
                 E = alg.from_coords(v[None, :])
                 return alg.to_coords(E - self._jvp(prob, xi, gi, E, m))[0]
+
+            import scipy.sparse.linalg as spla  # Newton-Krylov only: not at import
 
             op = spla.LinearOperator((alg.dim, alg.dim), matvec=matvec, dtype=np.float64)
             d, _info = spla.gmres(

@@ -244,9 +244,10 @@ def compiled_runner(
     kernel = problem.kernel
     if kernel is None:
         return None
-    base, gammas = method, (1.0,)
+    base: Any = method
+    gammas_t: tuple[float, ...] = (1.0,)
     if isinstance(method, Composition):
-        base, gammas = method.base, tuple(method.coefficients)
+        base, gammas_t = method.base, tuple(method.coefficients)
     if not isinstance(base, (IsoMP, SphericalMidpoint)):
         return None
     if type(base.solver) is not FixedPoint:
@@ -270,13 +271,13 @@ def compiled_runner(
         and layout.iterate is dense.iterate_small
         and M >= BLOCKED_MIN_MEMBERS
         and base.solver.anderson == 0
-        and len(gammas) == 1
+        and len(gammas_t) == 1
     ):
         return BlockedRunner(
             layout, problem, base, y, h, method_state=method_state, k=k, failures=failures
         )
     return CompiledRunner(
-        layout, problem, base, np.asarray(gammas, dtype=np.float64), y, h,
+        layout, problem, base, np.asarray(gammas_t, dtype=np.float64), y, h,
         method_state=method_state, k=k, failures=failures,
         composed=isinstance(method, Composition),
     )  # fmt: skip
@@ -305,7 +306,9 @@ class CompiledRunner(Runner):
         self.h = float(h)
         self.k = int(k)
         self.failures = failures if failures is not None else MemberFailures.none(self.M)
-        self.f, self.fargs = layout.field or problem.kernel.field()  # type: ignore[union-attr]
+        field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
+        self.f: Any = field[0]
+        self.fargs: tuple[Any, ...] = field[1]
         solver = method.solver
         self.solver = solver
         self.kmax = _extrapolation(method)

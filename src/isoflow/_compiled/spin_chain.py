@@ -41,97 +41,95 @@ _FM = {"reassoc", "nsz"}
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)
-def _iso_one(X, W, G, i, im, ip, c, half, quarter):  # type: ignore[no-untyped-def]
-    x0, x1, x2 = X[0, i], X[1, i], X[2, i]
-    b0 = c * (X[0, im] + X[0, ip])
-    b1 = c * (X[1, im] + X[1, ip])
-    b2 = c * (X[2, im] + X[2, ip])
+def _b(X, N, c, im, ip):  # type: ignore[no-untyped-def]
+    """``B_i = c (x_{i-1} + x_{i+1})`` from the flat ``(3, N)`` layout (neighbours ``im, ip``)."""
+    return (
+        c * (X[im] + X[ip]), c * (X[N + im] + X[N + ip]), c * (X[2 * N + im] + X[2 * N + ip]),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _iso_one(X, W, G, N, i, im, ip, c, half, quarter):  # type: ignore[no-untyped-def]
+    x0, x1, x2 = X[i], X[N + i], X[2 * N + i]
+    b0, b1, b2 = _b(X, N, c, im, ip)
     d = -(b0 * x0 + b1 * x1 + b2 * x2)
-    g0 = W[0, i] + half * (b1 * x2 - b2 * x1) + quarter * (d * b0)
-    g1 = W[1, i] + half * (b2 * x0 - b0 * x2) + quarter * (d * b1)
-    g2 = W[2, i] + half * (b0 * x1 - b1 * x0) + quarter * (d * b2)
-    G[0, i] = g0
-    G[1, i] = g1
-    G[2, i] = g2
+    g0 = W[i] + half * (b1 * x2 - b2 * x1) + quarter * (d * b0)
+    g1 = W[N + i] + half * (b2 * x0 - b0 * x2) + quarter * (d * b1)
+    g2 = W[2 * N + i] + half * (b0 * x1 - b1 * x0) + quarter * (d * b2)
+    G[i] = g0
+    G[N + i] = g1
+    G[2 * N + i] = g2
     return (g0 - x0) ** 2 + (g1 - x1) ** 2 + (g2 - x2) ** 2
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)
-def _smm_one(m, X, W, G, i, im, ip, c, half):  # type: ignore[no-untyped-def]
-    x0, x1, x2 = m[0, i], m[1, i], m[2, i]
-    b0 = c * (m[0, im] + m[0, ip])
-    b1 = c * (m[1, im] + m[1, ip])
-    b2 = c * (m[2, im] + m[2, ip])
-    g0 = W[0, i] + half * (b1 * x2 - b2 * x1)
-    g1 = W[1, i] + half * (b2 * x0 - b0 * x2)
-    g2 = W[2, i] + half * (b0 * x1 - b1 * x0)
-    G[0, i] = g0
-    G[1, i] = g1
-    G[2, i] = g2
-    return (g0 - X[0, i]) ** 2 + (g1 - X[1, i]) ** 2 + (g2 - X[2, i]) ** 2
+def _smm_one(m, X, W, G, N, i, im, ip, c, half):  # type: ignore[no-untyped-def]
+    x0, x1, x2 = m[i], m[N + i], m[2 * N + i]
+    b0, b1, b2 = _b(m, N, c, im, ip)
+    g0 = W[i] + half * (b1 * x2 - b2 * x1)
+    g1 = W[N + i] + half * (b2 * x0 - b0 * x2)
+    g2 = W[2 * N + i] + half * (b0 * x1 - b1 * x0)
+    G[i] = g0
+    G[N + i] = g1
+    G[2 * N + i] = g2
+    return (g0 - X[i]) ** 2 + (g1 - X[N + i]) ** 2 + (g2 - X[2 * N + i]) ** 2
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)
-def _point_one(M, W, m, i):  # type: ignore[no-untyped-def]
-    w0, w1, w2 = W[0, i], W[1, i], W[2, i]
-    a0, a1, a2 = M[0, i], M[1, i], M[2, i]
+def _point_one(M, W, m, N, i):  # type: ignore[no-untyped-def]
+    w0, w1, w2 = W[i], W[N + i], W[2 * N + i]
+    a0, a1, a2 = M[i], M[N + i], M[2 * N + i]
     nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
     v0, v1, v2 = 2.0 * a0 - w0, 2.0 * a1 - w1, 2.0 * a2 - w2
     nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     nm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
     f = math.sqrt(nw * nv) / nm if nm > 0 else 0.0
-    m[0, i] = f * a0
-    m[1, i] = f * a1
-    m[2, i] = f * a2
+    m[i] = f * a0
+    m[N + i] = f * a1
+    m[2 * N + i] = f * a2
 
 
 @numba.njit(cache=True, fastmath=_FM)
-def _iso_range(X, W, G, c, half, quarter, lo, hi):  # type: ignore[no-untyped-def]
+def _iso_range(X, W, G, N, c, half, quarter, lo, hi):  # type: ignore[no-untyped-def]
     """IsoMP sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``)."""
     acc = 0.0
     for i in range(lo, hi):
-        acc += _iso_one(X, W, G, i, i - 1, i + 1, c, half, quarter)
+        acc += _iso_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter)
     return acc
 
 
 @numba.njit(cache=True, fastmath=_FM)
-def _point_range(X, W, m, lo, hi):  # type: ignore[no-untyped-def]
+def _point_range(X, W, m, N, lo, hi):  # type: ignore[no-untyped-def]
     for i in range(lo, hi):
-        _point_one(X, W, m, i)
+        _point_one(X, W, m, N, i)
 
 
 @numba.njit(cache=True, fastmath=_FM)
-def _smm_range(m, X, W, G, c, half, lo, hi):  # type: ignore[no-untyped-def]
+def _smm_range(m, X, W, G, N, c, half, lo, hi):  # type: ignore[no-untyped-def]
     acc = 0.0
     for i in range(lo, hi):
-        acc += _smm_one(m, X, W, G, i, i - 1, i + 1, c, half)
+        acc += _smm_one(m, X, W, G, N, i, i - 1, i + 1, c, half)
     return acc
 
 
-def _views(sp, W, X, G):  # type: ignore[no-untyped-def]
-    N = sp[0]
-    return N, W.reshape((3, N)), X.reshape((3, N)), G.reshape((3, N))
-
-
-_views = numba.njit(cache=True, inline="always")(_views)
-
-
+# The stages index the flat (3, N) layout directly (component ``a`` of spin ``i`` at
+# ``a * N + i``): no reshaped views, which numba's parallel lowering does not write through.
 @numba.njit(cache=True)
 def iterate_iso_ser(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
     """One IsoMP sweep over the chain (``f`` is not called: ``B`` is formed on the fly)."""
-    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    N = sp[0]
     c = sp[1]
-    rr = _iso_one(Xm, Wm, Gm, 0, N - 1, 1 % N, c, half, quarter)
+    rr = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter)
     if N > 1:
-        rr += _iso_range(Xm, Wm, Gm, c, half, quarter, 1, N - 1)
-        rr += _iso_one(Xm, Wm, Gm, N - 1, N - 2, 0, c, half, quarter)
+        rr += _iso_range(X, W, G, N, c, half, quarter, 1, N - 1)
+        rr += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
     return rr
 
 
 @numba.njit(cache=True, parallel=True)
 def iterate_iso_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
     """:func:`iterate_iso_ser` with the chain cut into ``sp[2]`` chunks over numba threads."""
-    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    N = sp[0]
     c = sp[1]
     nch = sp[2]
     size = (N + nch - 1) // nch
@@ -140,70 +138,68 @@ def iterate_iso_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: i
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _iso_range(Xm, Wm, Gm, c, half, quarter, lo, hi)
+            part[ch] = _iso_range(X, W, G, N, c, half, quarter, lo, hi)
     rr = part.sum()
-    rr += _iso_one(Xm, Wm, Gm, 0, N - 1, 1, c, half, quarter)
-    rr += _iso_one(Xm, Wm, Gm, N - 1, N - 2, 0, c, half, quarter)
+    rr += _iso_one(X, W, G, N, 0, N - 1, 1, c, half, quarter)
+    rr += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
     return rr
 
 
 @numba.njit(cache=True)
 def iterate_smm_ser(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
     """One spherical-midpoint iteration: the points ``m`` (into ``work[0]``), then the sweep."""
-    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    N = sp[0]
     c = sp[1]
-    m = work[0].reshape((3, N))
-    _point_range(Xm, Wm, m, 0, N)
-    rr = _smm_one(m, Xm, Wm, Gm, 0, N - 1, 1 % N, c, half)
+    m = work[0]
+    _point_range(X, W, m, N, 0, N)
+    rr = _smm_one(m, X, W, G, N, 0, N - 1, 1 % N, c, half)
     if N > 1:
-        rr += _smm_range(m, Xm, Wm, Gm, c, half, 1, N - 1)
-        rr += _smm_one(m, Xm, Wm, Gm, N - 1, N - 2, 0, c, half)
+        rr += _smm_range(m, X, W, G, N, c, half, 1, N - 1)
+        rr += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
     return rr
 
 
 @numba.njit(cache=True, parallel=True)
 def iterate_smm_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
     """:func:`iterate_smm_ser` over ``sp[2]`` chunks on numba threads."""
-    N, Wm, Xm, Gm = _views(sp, W, X, G)
+    N = sp[0]
     c = sp[1]
     nch = sp[2]
-    m = work[0].reshape((3, N))
+    m = work[0]
     size = (N + nch - 1) // nch
     part = np.zeros(nch)
     for ch in numba.prange(nch):
         lo = ch * size
         hi = min((ch + 1) * size, N)
         if lo < hi:
-            _point_range(Xm, Wm, m, lo, hi)
+            _point_range(X, W, m, N, lo, hi)
     for ch in numba.prange(nch):
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _smm_range(m, Xm, Wm, Gm, c, half, lo, hi)
+            part[ch] = _smm_range(m, X, W, G, N, c, half, lo, hi)
     rr = part.sum()
-    rr += _smm_one(m, Xm, Wm, Gm, 0, N - 1, 1, c, half)
-    rr += _smm_one(m, Xm, Wm, Gm, N - 1, N - 2, 0, c, half)
+    rr += _smm_one(m, X, W, G, N, 0, N - 1, 1, c, half)
+    rr += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
     return rr
 
 
 @numba.njit(cache=True, fastmath=_FM)
-def _final(Y, W, Wn, c, h):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B(Y) x Y``; returns a sum that is finite iff every entry is."""
-    N = Y.shape[1]
+def _final(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(Y) x Y`` (flat ``(3, N)``); returns a sum that is finite iff every entry
+    is."""
     acc = 0.0
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
-        y0, y1, y2 = Y[0, i], Y[1, i], Y[2, i]
-        b0 = c * (Y[0, im] + Y[0, ip])
-        b1 = c * (Y[1, im] + Y[1, ip])
-        b2 = c * (Y[2, im] + Y[2, ip])
-        v0 = W[0, i] + h * (b1 * y2 - b2 * y1)
-        v1 = W[1, i] + h * (b2 * y0 - b0 * y2)
-        v2 = W[2, i] + h * (b0 * y1 - b1 * y0)
-        Wn[0, i] = v0
-        Wn[1, i] = v1
-        Wn[2, i] = v2
+        y0, y1, y2 = Y[i], Y[N + i], Y[2 * N + i]
+        b0, b1, b2 = _b(Y, N, c, im, ip)
+        v0 = W[i] + h * (b1 * y2 - b2 * y1)
+        v1 = W[N + i] + h * (b2 * y0 - b0 * y2)
+        v2 = W[2 * N + i] + h * (b0 * y1 - b1 * y0)
+        Wn[i] = v0
+        Wn[N + i] = v1
+        Wn[2 * N + i] = v2
         acc += abs(v0) + abs(v1) + abs(v2)
     return acc
 
@@ -211,14 +207,10 @@ def _final(Y, W, Wn, c, h):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def finish_iso(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(X) x X`` from the accepted ``X`` (the bracket of its last evaluation)."""
-    N = sp[0]
-    acc = _final(X.reshape((3, N)), W.reshape((3, N)), Wn.reshape((3, N)), sp[1], h)
-    return math.isfinite(acc)
+    return math.isfinite(_final(X, W, Wn, sp[0], sp[1], h))
 
 
 @numba.njit(cache=True)
 def finish_smm(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(m) x m`` with the points ``m`` of the last iteration (``work[0]``)."""
-    N = sp[0]
-    acc = _final(work[0].reshape((3, N)), W.reshape((3, N)), Wn.reshape((3, N)), sp[1], h)
-    return math.isfinite(acc)
+    return math.isfinite(_final(work[0], W, Wn, sp[0], sp[1], h))

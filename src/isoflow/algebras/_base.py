@@ -18,11 +18,13 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 from .._errors import (
     DtypeError,
@@ -421,6 +423,8 @@ class MatrixAlgebra(Algebra):
                 cols.append(diag[k])
                 vals.append(-k / norm)
                 k_row += 1
+        import scipy.sparse as sp
+
         return sp.csr_array((vals, (rows, cols)), shape=(k_row, m))
 
     def trace_powers(self, W: Array) -> Array:

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 from .._errors import ParameterError
 from ._base import Algebra
@@ -60,4 +62,6 @@ class ParticleVectors(Algebra):
         return np.where(sq > 0, sq, fallback)
 
     def _basis_matrix(self) -> sp.csr_array:
+        import scipy.sparse as sp
+
         return sp.identity(3 * self.N, format="csr", dtype=np.float64)

@@ -10,11 +10,13 @@ copies one after the other.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 from .._errors import ParameterError, ShapeError
 from ._base import Algebra
@@ -93,6 +95,8 @@ class Stacked(Algebra):
         """Block-diagonal basis in the flat representation of ``(copies, *base.shape)``
         (for complex spaces: all real parts, then all imaginary parts)."""
         basis = self.base.basis_matrix
+        import scipy.sparse as sp
+
         eye = sp.identity(self.copies, format="csr")
         if not self.is_complex:
             return sp.csr_array(sp.kron(eye, basis))
