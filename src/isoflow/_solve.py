@@ -77,6 +77,8 @@ CHUNK_BYTES = 64 * 2**20
 #: pipeline: the diagnostics of one chunk overlap the stepping of the next). Long against
 #: the interpreter's thread switch interval (5 ms), short against :data:`CHUNK_SECONDS`.
 PIPELINE_SECONDS = 0.05
+#: Fewest saved rows for which the writer thread is worth starting.
+PIPELINE_MIN_ROWS = 256
 
 
 @dataclass(frozen=True)
@@ -784,7 +786,11 @@ def _run(
     compute_series = diagnostics or not memory
     sink = _Sink(
         out_writer, accumulator, compute_series,
-        background=compute_series and not getattr(runner, "parallel", False),
+        background=(
+            compute_series
+            and not getattr(runner, "parallel", False)
+            and _save_steps(runner.k, n, save_every, n) >= PIPELINE_MIN_ROWS
+        ),
     )  # fmt: skip
 
     def emit(ts: Array, ys: Array) -> None:

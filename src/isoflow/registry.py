@@ -586,6 +586,7 @@ EXPERIMENTS: dict[str, str] = {
         "vortices-trajectories",
         "vortices-invariants",
         "euler-sphere",
+        "work-precision",
     )
 }
 

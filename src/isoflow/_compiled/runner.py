@@ -70,6 +70,19 @@ def sigma_sign(alg: Any) -> float | None:
     return None
 
 
+#: Compiled drivers of this process by :meth:`CompiledRunner._driver`'s key.
+_DRIVERS: dict[Any, Any] = {}
+
+
+def _type_key(x: Any) -> Any:
+    """What numba types an argument by (arrays: dtype, dimensions, layout, writability)."""
+    if isinstance(x, np.ndarray):
+        return ("array", x.dtype.str, x.ndim, x.flags.c_contiguous, x.flags.writeable)
+    if isinstance(x, tuple):
+        return tuple(_type_key(v) for v in x)
+    return type(x)
+
+
 def _threads() -> int:
     import numba
 
@@ -393,13 +406,19 @@ class CompiledRunner(Runner):
 
     # ---- running -----------------------------------------------------------------------------
     def _driver(self) -> Any:
-        """The compiled driver of this run (compiled, or loaded from numba's cache, once)."""
+        """The compiled driver of this run (compiled, or loaded from numba's cache, once per
+        process for each field, argument types and stage: later runs reuse it at once)."""
         from .signatures import compiled_driver, stage_types
 
         L = self.layout
-        st = stage_types(self.f, self.fargs, L.sp, self.W.dtype)
-        st.compile_stage(L.iterate, L.finish)
-        return compiled_driver(st.driver_signature(), self.parallel)
+        key = (self.f, _type_key(self.fargs), L.iterate, L.finish, _type_key(L.sp),
+               self.W.dtype.str, self.parallel)  # fmt: skip
+        drive = _DRIVERS.get(key)
+        if drive is None:
+            st = stage_types(self.f, self.fargs, L.sp, self.W.dtype)
+            st.compile_stage(L.iterate, L.finish)
+            drive = _DRIVERS[key] = compiled_driver(st.driver_signature(), self.parallel)
+        return drive
 
     #: Checkpoints of this runner must fall on save points (see :attr:`Layout.restart_at_saves`).
     @property

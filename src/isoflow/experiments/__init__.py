@@ -36,6 +36,7 @@ from .spin_chain_energy import spin_chain_energy as spin_chain_energy
 from .spin_chain_error import spin_chain_error as spin_chain_error
 from .vortices_invariants import vortices_invariants as vortices_invariants
 from .vortices_trajectories import vortices_trajectories as vortices_trajectories
+from .work_precision import work_precision as work_precision
 
 __all__ = [
     "EXPERIMENTS",
@@ -52,6 +53,7 @@ __all__ = [
     "spin_chain_error",
     "vortices_invariants",
     "vortices_trajectories",
+    "work_precision",
 ]
 
 #: Command-line name -> experiment, in the order of :data:`isoflow.registry.EXPERIMENTS`.
