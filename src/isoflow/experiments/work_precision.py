@@ -164,8 +164,8 @@ class WorkPrecision(Experiment):
         rb = sweeps["rigid body so(10)"]
         at = {label: _at_error(rec, target) for label, rec in rb.items()}
         preserving = {k: v for k, v in at.items() if k.startswith(("IsoMP o", "IsoSyRK"))}
-        best = min((k for k in preserving if np.isfinite(preserving[k])), key=preserving.get,
-                   default="IsoMP o kahan-li-8")  # fmt: skip
+        reached = [k for k in preserving if np.isfinite(preserving[k])]
+        best = min(reached, key=lambda k: preserving[k]) if reached else "IsoMP o kahan-li-8"
         speed_vs_isomp = at["IsoMP"] / at[best] if np.isfinite(at[best]) else np.nan
         speed_vs_dop = at["DOP853"] / at[best] if np.isfinite(at[best]) else np.nan
         long = self._long_run(problems["rigid body so(10)"], best, rb, target, T_long, progress)
@@ -253,7 +253,7 @@ class WorkPrecision(Experiment):
             "dop853_tolerance": tol,
             "casimir_drift": float(np.max(d.casimir_drift)),
             "casimir_drift_dop853": float(np.max(np.abs(C_dop - C_dop[:1]) / scale)),
-            "energy_drift": float(np.max(d.hamiltonian_relative_drift)),
+            "energy_drift": float(np.max(np.asarray(d.hamiltonian_relative_drift))),
             "energy_drift_dop853": float(np.max(np.abs(H_dop - H_dop[0]) / abs(H_dop[0]))),
             "seconds": wall,
             "seconds_dop853": wall_dop,
