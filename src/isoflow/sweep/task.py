@@ -47,10 +47,14 @@ def build_member(spec: SweepSpec, member: Member) -> tuple[Any, Array]:
 
 
 def _method(spec: SweepSpec) -> Any:
-    from ..registry import build
+    """The sweep's method with its solver (the registry's, as :func:`~isoflow.registry.build`)."""
+    from ..registry import METHODS, make_method, make_solver
 
-    config = spec.config(spec.members[0])
-    return build(config, model=spec.model_spec())[2]
+    run = spec.run
+    solver = None
+    if METHODS[run["method"]].implicit:
+        solver = make_solver(run["solver"], rtol=run["rtol"], anderson=run.get("anderson", 0))
+    return make_method(run["method"], solver)
 
 
 def build_task(spec: SweepSpec, task: Task) -> tuple[Any, Array, Any, dict[str, Any]]:
