@@ -23,22 +23,30 @@ import numpy as np
 
 from .._solve import Solution, solve
 from .files import read_json, task_paths, write_json_atomic
-from .spec import Member, SweepSpec, Task
+from .spec import Member, SweepSpec, Task, canonical_json
 
 __all__ = ["build_member", "build_task", "member_run", "run_task", "watch_client"]
 
 Array = Any
 
 
-def build_member(spec: SweepSpec, member: Member) -> tuple[Any, Array]:
+def build_member(
+    spec: SweepSpec, member: Member, _made: dict[str, tuple[Any, Any]] | None = None
+) -> tuple[Any, Array]:
     """``(problem, y0)`` of one member: the model's, then perturbed if the sweep says so.
 
     With ``perturb = eps`` the initial state is ``project(y0 + eps |y0| R / |R|)`` where ``R``
     is a random element of the space drawn from the member's seed (norms are Frobenius norms
     over all entries).
     """
-    problem, y0 = spec.model_spec().make(member.params)
-    y0 = np.asarray(y0)
+    key = canonical_json(member.params)
+    if _made is not None and key in _made:  # members differing only in the perturbation seed
+        problem, y0 = _made[key]
+    else:
+        problem, y0 = spec.model_spec().make(member.params)
+        if _made is not None:
+            _made[key] = (problem, y0)
+    y0 = np.array(y0)
     if spec.perturb is not None:
         alg = problem.algebra
         R = np.asarray(alg.random(np.random.default_rng(member.seed)))
@@ -66,8 +74,9 @@ def build_task(spec: SweepSpec, task: Task) -> tuple[Any, Array, Any, dict[str, 
     """
     problem = None
     states = []
+    made: dict[str, tuple[Any, Any]] = {}
     for m in task.members:
-        p, y0 = build_member(spec, m)
+        p, y0 = build_member(spec, m, made)
         problem = p if problem is None else problem
         states.append(y0)
     run = spec.run
@@ -230,6 +239,7 @@ def run_task(
     from .. import io
     from ..threads import thread_limits
 
+    started = time.perf_counter()
     if watch_pid is not None:
         watch_client(watch_pid)
     task = spec.task_of(task_id)
@@ -272,6 +282,7 @@ def run_task(
                     problem, method, Y, progress=False, throw=False, writer=writer, **kwargs
                 )
             summary = _summary(spec, task, sol, problem, Y)
+            summary["task_seconds"] = time.perf_counter() - started
             write_json_atomic(paths.json, summary)
             _log(paths.log, f"done: {sol.message}")
             return summary
