@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -309,6 +310,15 @@ def test_failing_member_and_raising_task_are_reported_others_finish(client, tmp_
     assert np.isnan(_local(ds, "y")[0]).all() and np.isfinite(_local(ds, "y")[1]).all()
     assert "ParameterError" in task_paths(tmp_path / "raise", bad.id).log.read_text()
     assert status(tmp_path / "raise")["errors"] == {bad.id: res.errors[bad.id]}
+    out = subprocess.run([sys.executable, "-m", "isoflow.cli", "info", str(tmp_path / "fail")],
+                         capture_output=True, text=True, check=True, timeout=120)  # fmt: skip
+    assert re.search(r"members +3 in 1 task\n", out.stdout) and "member 1" in out.stdout
+    assert "failed at step 0: diverged" in out.stdout
+    out = subprocess.run(
+        [sys.executable, "-m", "isoflow.cli", "info", "--json", str(tmp_path / "raise")],
+        capture_output=True, text=True, check=True, timeout=120,
+    )  # fmt: skip
+    assert json.loads(out.stdout)["errors"] == res.errors
 
 
 def test_rerun_redoes_only_deleted_summaries_and_files(client, tmp_path: Path) -> None:
@@ -331,8 +341,8 @@ LONG = {
     "model": "rigid-body",
     "params": {"n": 10},
     "dt": 0.05,
-    "n_steps": 40000,
-    "save_every": 4000,
+    "n_steps": 24000,
+    "save_every": 2400,
     "perturb": 1e-3,
     "members_per_task": 4,
     "chunk_rows": 1,

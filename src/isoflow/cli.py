@@ -590,7 +590,8 @@ def _info_sweep(args: argparse.Namespace) -> int:
         f"{data['path']}: isoflow sweep, model {data['model']}, method {run.get('method')}",
         f"  {'time grid':<24} t0 = {run['t0']:g}, dt = {run['dt']:g}, {run['n_steps']} steps, "
         f"save every {run['save_every']}",
-        f"  {'members':<24} {data['members']} in {data['tasks']} tasks"
+        f"  {'members':<24} {data['members']} in {data['tasks']} task"
+        + ("" if data["tasks"] == 1 else "s")
         + ("" if data["perturb"] is None else f" (perturb {data['perturb']:g})"),
         f"  {'tasks':<24} {data['done']} done, {data['partial']} partial, "
         f"{data['pending']} not started",
