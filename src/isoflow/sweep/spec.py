@@ -8,6 +8,7 @@ nothing itself.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -407,4 +408,4 @@ def _with_tasks(spec: SweepSpec) -> SweepSpec:
         for start in range(0, len(group), spec.members_per_task):
             chunk = tuple(group[start : start + spec.members_per_task])
             tasks.append(Task(spec.task_id(chunk), chunk))
-    return SweepSpec(**{**spec.__dict__, "tasks": tuple(tasks)})
+    return dataclasses.replace(spec, tasks=tuple(tasks))
