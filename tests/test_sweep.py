@@ -406,7 +406,8 @@ def test_client_killed_and_restarted_finishes_like_an_uninterrupted_run(
 ) -> None:
     f = tmp_path / "long.toml"
     lines = [f"{k} = {json.dumps(v)}" for k, v in LONG.items() if not isinstance(v, dict)]
-    f.write_text("\n".join(lines) + "\n[params]\nn = 10\n[grid]\nseed = {start = 0, stop = 8}\n")
+    # four tasks on two workers: when the first is done, another one is still running
+    f.write_text("\n".join(lines) + "\n[params]\nn = 10\n[grid]\nseed = {start = 0, stop = 16}\n")
     spec = read_spec(f)
     d = tmp_path / "d"
     cmd = [sys.executable, "-m", "isoflow.cli", "sweep", str(f), "--out", str(d),
