@@ -11,6 +11,7 @@ The first run compiles the loop for this kernel (seconds); with ``cache=True`` n
 machine code in ``NUMBA_CACHE_DIR`` (or beside the source file), so a new process only loads it.
 """
 
+import inspect
 import os
 import subprocess
 import sys
@@ -69,8 +70,9 @@ print(f"same final state   : {np.abs(second.y_final - slow.y_final).max():.1e} a
 # instead of compiling it.
 
 env = dict(os.environ, ISOFLOW_EXAMPLE_CHILD="1")
+script = inspect.getsourcefile(rigid_body_B.py_func)  # this file
 out = subprocess.run(
-    [sys.executable, __file__], env=env, capture_output=True, text=True, check=True
+    [sys.executable, script], env=env, capture_output=True, text=True, check=True
 ).stdout.split()
 load, t_child = float(out[-2]), float(out[-1])
 print(f"new process: loading the loop took {load:.2f} s, the whole solve {t_child:.2f} s")

@@ -22,7 +22,7 @@ import isoflow as iso
 tmp = Path(tempfile.mkdtemp())
 prob, w0 = iso.models.heisenberg_chain(N=20)
 path = tmp / "chain.h5"
-config = {"model": "heisenberg-chain", "params": {"N": 20}, "dt": 0.1, "n_steps": 500}
+config = {"model": "spin-chain", "params": {"N": 20}, "dt": 0.1, "n_steps": 500}
 sol = iso.solve(prob, iso.IsoMP(), w0, dt=0.1, n_steps=500, save_every=5,
                 writer=iso.io.HDF5Writer(path, config))  # fmt: skip
 print(sol.message)

@@ -378,8 +378,8 @@ _SECTIONS = {"Parameters", "Returns", "Yields", "Attributes", "Other Parameters"
 
 
 def escape_type_stars(app: Any, what: str, name: str, obj: Any, options: Any, lines: list) -> None:
-    """Escape ``*`` in numpydoc type lines (``shape (*batch, n, n)``), which reST would read
-    as the start of emphasis."""
+    """Escape ``*`` and ``|`` in numpydoc type lines (``shape (*batch, n, n)``,
+    ``shape (N - |m|,)``), which reST would read as emphasis and substitutions."""
     section, indent = None, None
     for i, line in enumerate(lines):
         stripped = line.strip()
@@ -405,8 +405,8 @@ def _escape(text: str) -> str:
     for j, ch in enumerate(text):
         if text.startswith("``", j):
             literal = not literal
-        if ch == "*" and not literal and (j == 0 or text[j - 1] != "\\"):
-            out.append("\\*")
+        if ch in "*|" and not literal and (j == 0 or text[j - 1] != "\\"):
+            out.append("\\" + ch)
         else:
             out.append(ch)
     return "".join(out)
