@@ -42,6 +42,7 @@ degrees = np.arange(1, E.shape[-1] + 1)
 ax_e.loglog(degrees, E[0], "o-", ms=3, label="t = 0")
 ax_e.loglog(degrees, E[-1], "s-", ms=3, label=f"t = {T:g}")
 ax_e.set(xlabel="degree l", ylabel="E_l", title="energy spectrum")
+ax_e.set_ylim(bottom=E[-1].min() / 10)  # the initial data have no energy above l = 10
 ax_e.legend()
 for k in range(C.shape[-1]):
     rel = np.abs(C[:, k] / C[0, k] - 1)
