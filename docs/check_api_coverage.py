@@ -95,9 +95,12 @@ def main(argv: list[str]) -> int:
         for name in getattr(module, "__all__", ()):
             total += 1
             full = f"{mod}.{name}"
-            if full in inventory:
-                continue
             obj = getattr(module, name, _MISSING)
+            # the same name as a module's (``isoflow.models.rigid_body`` is both the module and,
+            # as an attribute of ``isoflow.models``, its function) counts only for a module
+            is_module = isinstance(obj, types.ModuleType)
+            if full in inventory and (inventory[full] == "py:module") == is_module:
+                continue
             if isinstance(obj, types.ModuleType):
                 if obj.__name__ in inventory:
                     continue

@@ -3,8 +3,8 @@
 - :func:`write_api_pages` writes ``docs/api/*.rst`` from the ``__all__`` of every public module
   at each build (a module is public when no part of its dotted name starts with ``_``), so a new
   module appears in the reference without editing any page. Each object is described once, under
-  its *canonical* name (the public module nearest to where it is defined); other modules that
-  export it list it with a link.
+  its *canonical* name (the shortest public name: ``isoflow.IsoMP``, not
+  ``isoflow.methods.isomp.IsoMP``); other modules that export it list it with a link.
 - :func:`resolve_short_names` resolves the short names docstrings use (``Solution``,
   ``IsoMP.advance``, ``io.load``) to the documented objects, and renders names of other
   libraries (numpy, scipy, matplotlib, xarray, ...) as plain code: no intersphinx inventory can
@@ -23,6 +23,7 @@ import importlib
 import inspect
 import json
 import pkgutil
+import re
 import sys
 import types
 from collections.abc import Iterator
@@ -148,19 +149,22 @@ def canonical_names(modules: list[types.ModuleType]) -> dict[tuple[str, str], st
             for mod, name, _ in entries:
                 by_name.setdefault(name, []).append(mod)
             for name, mods in by_name.items():
-                home = max(mods, key=lambda m: (m.count("."), m))
+                home = min(mods, key=lambda m: (m.count("."), m))
                 for mod in mods:
                     result[(mod, name)] = f"{home}.{name}"
             continue
+        # the shortest public name users reach it by (``isoflow.IsoMP`` rather than
+        # ``isoflow.methods.isomp.IsoMP``); among equally short ones, the module it comes from
         home_module = _public_prefix(getattr(obj, "__module__", "") or "")
-        candidates = sorted({mod for mod, _, _ in entries})
-        if home_module in candidates:
-            home = home_module
-        else:
-            inside = [m for m in candidates if home_module.startswith(m + ".") or m == home_module]
-            home = max(inside, key=len) if inside else min(candidates, key=len)
-        if home not in names:
-            home = candidates[0]
+        candidates = sorted({mod for mod, _, _ in entries if mod in names})
+        # not a name that is also a module's (``isoflow.models.rigid_body`` is the module; its
+        # function is described as ``isoflow.models.rigid_body.rigid_body``)
+        free = [m for m, n, _ in entries if m in names and f"{m}.{n}" not in names]
+        candidates = sorted(set(free)) or candidates
+        home = min(
+            candidates,
+            key=lambda m: (m.count("."), not (home_module + ".").startswith(m + "."), m),
+        )
         home_name = next(name for mod, name, _ in entries if mod == home)
         for mod, name, _ in entries:
             result[(mod, name)] = f"{home}.{home_name}"
@@ -226,8 +230,8 @@ def write_api_pages(app: Any = None) -> list[str]:
     index += [
         "Generated at every build from the ``__all__`` of ``isoflow`` and of each public module",
         "(no part of its dotted name starts with an underscore). An object exported by several",
-        "modules is described once, under the module nearest to its definition, and listed with",
-        "a link in the others.",
+        "modules is described once, under its shortest public name (``isoflow.IsoMP``, not",
+        "``isoflow.methods.isomp.IsoMP``), and listed with a link in the others.",
         "",
         ".. toctree::",
         "   :maxdepth: 1",
@@ -377,9 +381,19 @@ def _lookup(domain: Any, candidates: list[str], module: str | None) -> str | Non
 _SECTIONS = {"Parameters", "Returns", "Yields", "Attributes", "Other Parameters", "Receives"}
 
 
+_NOTES = re.compile(r"(?:/work/shared/paper/|\.\./shared/paper/)?NOTES\.md")
+
+
 def escape_type_stars(app: Any, what: str, name: str, obj: Any, options: Any, lines: list) -> None:
     """Escape ``*`` and ``|`` in numpydoc type lines (``shape (*batch, n, n)``,
-    ``shape (N - |m|,)``), which reST would read as emphasis and substitutions."""
+    ``shape (N - |m|,)``), which reST would read as emphasis and substitutions.
+
+    Also points the docstrings' mentions of the paper's notes (a file outside this repository)
+    at the site's own list of corrections.
+    """
+    for i, line in enumerate(lines):
+        if "NOTES.md" in line:
+            lines[i] = _NOTES.sub(":ref:`the corrections to the paper <corrections>`", line)
     section, indent = None, None
     for i, line in enumerate(lines):
         stripped = line.strip()
