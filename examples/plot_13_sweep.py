@@ -25,41 +25,46 @@ def available(name):
         return False
 
 
-if not (available("isoflow.sweep") and available("distributed")):
-    print("isoflow.sweep (or dask.distributed) is not available in this installation: skipped.")
-else:
+SPEC = {
+    "model": "brockett",
+    "method": "isomp",
+    "dt": 0.1,
+    "n_steps": 200,
+    "save_every": 10,
+    "members_per_task": 4,
+    "params": {"n": 6},
+    "grid": {"seed": {"start": 0, "stop": 8}},
+}
+
+
+def run_sweep(out):
+    """Eight members (seeds 0..7) in two tasks on two worker processes."""
     from distributed import Client, LocalCluster
 
-    spec = {
-        "model": "brockett",
-        "method": "isomp",
-        "dt": 0.1,
-        "n_steps": 200,
-        "save_every": 10,
-        "members_per_task": 4,
-        "params": {"n": 6},
-        "grid": {"seed": {"start": 0, "stop": 8}},
-    }
-    out = tempfile.mkdtemp()
     with (
         LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster,
         Client(cluster) as client,
     ):
-        iso.sweep(spec, out, client=client, progress=False)
+        iso.sweep(SPEC, out, client=client, progress=False)
     open_sweep = getattr(iso.io, "open_sweep", None) or iso.sweep.open_sweep
-    ds = open_sweep(out).sortby("member")
+    return open_sweep(out).sortby("member")
+
+
+if not (available("isoflow.sweep") and available("distributed")):
+    print("isoflow.sweep (or dask.distributed) is not available in this installation: skipped.")
+elif __name__ == "__main__":  # the worker processes import this file too; they run nothing
+    ds = run_sweep(tempfile.mkdtemp())
     print(ds)
 
     # %%
     # The Lyapunov function ``Tr(W N)`` of every member against time.
     fig = Figure(figsize=(7, 3.6), layout="constrained")
     ax = fig.subplots()
-    series = np.asarray(ds["lyapunov"]) if "lyapunov" in ds else None
-    if series is not None:
-        for k in range(series.shape[0]):
-            ax.plot(
-                np.asarray(ds["time"]), series[k], label=f"member {k} (seed {int(ds['seed'][k])})"
-            )
-        ax.set(xlabel="t", ylabel="Tr(W N)",
-               title="Brockett flow, herm(6), 8 seeds on 2 workers, h = 0.1")  # fmt: skip
-        ax.legend(fontsize=7, ncol=2)
+    lyapunov = np.asarray(ds["lyapunov"])
+    for k in range(lyapunov.shape[0]):
+        seed = int(ds["seed"][k])
+        ax.plot(np.asarray(ds["time"]), lyapunov[k], label=f"member {k} (seed {seed})")
+    ax.set(
+        xlabel="t", ylabel="Tr(W N)", title="Brockett flow, herm(6), 8 seeds on 2 workers, h = 0.1"
+    )
+    ax.legend(fontsize=7, ncol=2)
