@@ -480,8 +480,8 @@ class BenchmarkTable(Directive):
             text = [
                 ".. note::",
                 "",
-                "   No benchmark results in this checkout. Produce them (a few minutes on a",
-                "   2-core machine; ``--quick`` for a first look) and rebuild the site::",
+                "   No benchmark results in this checkout. Produce them (``--quick`` for a first",
+                "   look, ``--only 1,2`` for a subset) and rebuild the site::",
                 "",
                 "      python benchmarks/run_all.py --out benchmarks/results",
             ]
