@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -15,6 +16,9 @@ sys.path.insert(0, str(HERE / "_ext"))
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# module docstrings have prose sections of their own ("Conventions", "The sweep file (TOML)");
+# numpydoc renders them as written and says so in a UserWarning each, on every build
+warnings.filterwarnings("ignore", message="Unknown section", category=UserWarning)
 
 import isoflow  # noqa: E402
 
