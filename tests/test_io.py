@@ -14,7 +14,8 @@ import pytest
 import isoflow as iso
 from isoflow import io
 from isoflow.diagnostics import DiagnosticsAccumulator, compute_diagnostics
-from isoflow.io import _pack_state, _unpack_state
+from isoflow.io.codec import pack_state as _pack_state
+from isoflow.io.codec import unpack_state as _unpack_state
 
 CFG = {"model": "rigid-body", "params": {"n": 5}, "dt": 0.1, "n_steps": 700, "save_every": 3}
 
