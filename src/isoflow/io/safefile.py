@@ -100,6 +100,10 @@ class _Overlaid(io.RawIOBase):
     def readable(self) -> bool:
         return True
 
+    def fileno(self) -> int:
+        """The file descriptor (the file may have been renamed since it was opened)."""
+        return self._fd
+
     def seekable(self) -> bool:
         return True
 
