@@ -199,6 +199,9 @@ def test_a_full_disk_through_the_cli(tmp_path: Path) -> None:
     done = run_cli("run", "--resume", str(path), "--quiet")
     assert done.returncode == 0, done.stderr
     assert io.info(path)["state"] == "complete"
+    shown = run_cli("info", "--verify", str(path))
+    assert shown.returncode == 0 and "every saved state verified" in shown.stdout
+    assert "state                    complete" in shown.stdout
 
 
 # ---- SIGINT / SIGKILL of isoflow run at random moments, and two writers ----------------------
