@@ -237,7 +237,7 @@ def open_result(path: str | os.PathLike[str], *, check_live: bool = True) -> Ite
     except OSError as exc:
         raise ResultFileError(f"{p}: cannot read ({exc.strerror})") from None
     _check_truncated(p, head)
-    live = is_live(p) if check_live else None
+    live = is_live(os.path.realpath(p)) if check_live else None  # locks name the target
     view: ReadView | None = None
     try:
         # a live file too: HDF5's SWMR reader does not take a file object, and the writer's
@@ -461,7 +461,7 @@ def _live_retry(path: str | os.PathLike[str], read: Callable[[], _T]) -> _T:
         try:
             return read()
         except ResultFileError:
-            if is_live(path) is None:
+            if is_live(os.path.realpath(path)) is None:
                 raise
             time.sleep(0.05)
     return read()

@@ -165,12 +165,12 @@ class HDF5Writer:
     def _check(self) -> None:
         """Raise :class:`ResultWriteError` once a write to disk failed."""
         if self._sf is not None and self._sf.error is not None:
-            raise self._error(self._sf.error)
+            raise self._error(self._sf.error, published=self._partial is None)
 
-    def _error(self, err: OSError) -> ResultWriteError:
+    def _error(self, err: OSError, *, published: bool) -> ResultWriteError:
         """The error that stops the run after the failed write ``err``."""
         what = f"{err.strerror or err}" + (f" (errno {err.errno})" if err.errno else "")
-        if self._partial is not None:
+        if not published:
             return ResultWriteError(f"{self.path}: writing failed: {what}; no state was saved")
         return ResultWriteError(
             f"{self.path}: writing failed: {what}; the file keeps the run up to its last "
@@ -243,6 +243,7 @@ class HDF5Writer:
         if self._f is None:
             return
         err: OSError | None = None
+        published = self._partial is None
         try:
             if self._last is not None and self._h is not None and self._sf is not None:
                 if self._sf.error is None:
@@ -261,7 +262,7 @@ class HDF5Writer:
                     self._publish()
                 self._abandon()  # removes a file never published; releases the lock
         if err is not None:
-            raise self._error(err)
+            raise self._error(err, published=published)
 
     # resuming -------------------------------------------------------------------------------
 
