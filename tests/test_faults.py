@@ -267,7 +267,9 @@ def test_signals_at_random_moments(tmp_path: Path, long_ref: io.RunData, sig: in
         time.sleep(float(delay))
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
-        assert b"Traceback" not in err and b"Exception ignored" not in err, err[-2000:]
+        assert b"Exception ignored" not in err, err[-2000:]
+        if b"Traceback" in err:  # only Python's own, when SIGINT comes while it imports
+            assert err.rstrip().endswith(b"KeyboardInterrupt") and not path.exists(), err[-2000:]
         assert _leftovers(tmp_path) == [] or sig == signal.SIGKILL
         if path.exists():
             _resumes_bit_for_bit(path, long_ref)
@@ -385,12 +387,13 @@ def test_crafted_fields_give_one_line_errors(tmp_path: Path, case: str) -> None:
         with pytest.raises(iso.IsoflowError) as err:
             call()
         assert time.monotonic() - t < 5
-        assert ("\n" not in str(err.value) and str(path) in str(err.value)) or case.startswith(
-            "state"
-        )
+        assert "\n" not in str(err.value)
         if case == "state outside the space":
             assert isinstance(err.value, iso.NotInSpaceError)
+        elif case in ("another model", "n = 100000"):  # the registry says what is wrong
+            assert isinstance(err.value, iso.registry.ConfigError), repr(err.value)
         else:
+            assert str(path) in str(err.value)
             assert isinstance(err.value, io.ResultFileError), repr(err.value)
         assert path.read_bytes() == before
     assert _leftovers(tmp_path) == []

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import IsoflowError, ResultFileError
+from .._errors import ResultFileError
 from .._solve import RunState, Solution, check_restart, continue_run
 from ..diagnostics import DiagnosticsAccumulator
 from ..methods import Method
@@ -51,16 +51,11 @@ def _rebuild(
                 f"{p}: the file's configuration names no registered model; pass problem= and "
                 "method= to resume it"
             )
-        try:
-            # validated first: a configuration asking for a huge state is refused here,
-            # before anything is allocated
-            cfg = registry.normalize_config(config)
-            prob_b, y0_b, meth_b, _kw = registry.build(cfg)
-            registry.check_recorded_state(meta, prob_b, y0_b)
-        except IsoflowError as exc:
-            raise ResultFileError(
-                f"{p}: the file's configuration does not rebuild its run: {exc}"
-            ) from None
+        # validated first: a configuration asking for a huge state is refused here, before
+        # anything is allocated (registry errors, ConfigError, say what is wrong themselves)
+        cfg = registry.normalize_config(config)
+        prob_b, y0_b, meth_b, _kw = registry.build(cfg)
+        registry.check_recorded_state(meta, prob_b, y0_b)
         problem = problem if problem is not None else prob_b
         method = method if method is not None else meth_b
     if not isinstance(method, Method):
@@ -109,8 +104,11 @@ def resume(
     Raises
     ------
     ResultFileError
-        Another process writes the file; the file is damaged or crafted; or the problem,
-        method or configuration do not match the run it records (the file is left unchanged).
+        Another process writes the file; the file is damaged or crafted; or the problem or
+        method do not match the run it records (the file is left unchanged).
+    ConfigError
+        The stored configuration does not rebuild the recorded run (another model, a size out
+        of range, a model that is not built in); the file is left unchanged.
     NotInSpaceError
         The checkpoint state is not in the problem's space (as :func:`isoflow.solve`).
     """
