@@ -134,23 +134,25 @@ _MEMORY_PROBE = """
 import resource, sys, time, numpy as np, isoflow as iso
 from threadpoolctl import threadpool_limits
 threadpool_limits(1)
-M, n, se = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+M, n, se, diag = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4] == "1"
 prob, W0 = iso.models.rigid_body(10)
 alg = prob.algebra
 W = alg.random(0, batch=(M,)) * float(alg.norm(W0) / np.sqrt(alg.dim))
 iso.solve(prob, iso.IsoMP(), W[:20], dt=0.1, n_steps=3, progress=False)
 t = time.perf_counter()
-sol = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=n, save_every=se, progress=False)
+sol = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=n, save_every=se, diagnostics=diag,
+                progress=False)
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 print(time.perf_counter() - t, sol.ys.nbytes, peak)
 """
 
 
-def _probe(M: int, n: int, save_every: int) -> tuple[float, int, int]:
+def _probe(M: int, n: int, save_every: int, diagnostics: bool = True) -> tuple[float, int, int]:
     """``(seconds, saved bytes, peak RSS bytes)`` of an ensemble run in a fresh process."""
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    flag = "1" if diagnostics else "0"
     out = subprocess.run(
-        [sys.executable, "-c", _MEMORY_PROBE, str(M), str(n), str(save_every)],
+        [sys.executable, "-c", _MEMORY_PROBE, str(M), str(n), str(save_every), flag],
         capture_output=True, text=True, env=env, check=True,
     )  # fmt: skip
     t, saved, peak = out.stdout.split()[-3:]
@@ -164,13 +166,16 @@ def bench_9(quick: bool) -> list[dict[str, Any]]:
     r1 = t1 / t100
     M, steps = (10_000, 1_000) if not quick else (2_000, 200)
     best = {10: np.inf, steps: np.inf}
+    bare = np.inf  # save_every=10 without diagnostics: what saving alone costs
     mem: dict[int, tuple[int, int]] = {}
     for _ in range(2 if not quick else 1):
         for se in (10, steps):
             t, saved, peak = _probe(M, steps, se)
             best[se] = min(best[se], t)
             mem[se] = (saved, peak)
+        bare = min(bare, _probe(M, steps, 10, diagnostics=False)[0])
     r2 = best[10] / best[steps]
+    r_bare = bare / best[steps]
     return [
         {"id": 9, "name": "so(10): save_every=1 / save_every=100, diagnostics on, time per step",
          "us_per_step": {"save_every=1": t1 / n * 1e6, "save_every=100": t100 / n * 1e6},
@@ -178,6 +183,9 @@ def bench_9(quick: bool) -> list[dict[str, Any]]:
         {"id": 9, "name": f"{M} so(10): save_every=10 / end only, time per system-step",
          "us_per_system_step": {k: v / (M * steps) * 1e6 for k, v in best.items()},
          "saved_GB": mem[10][0] / 1e9, "peak_RSS_GB": mem[10][1] / 1e9,
+         "ratio_without_diagnostics": r_bare,
+         "why": f"saving alone costs {r_bare:.2f}x; the rest is the diagnostics of every saved "
+                "member (eigenvalues of each 10x10 state for the Casimirs, the Hamiltonian)",
          "metric": "ratio", "value": r2, "target": "<= 1.5", "met": r2 <= 1.5},
     ]  # fmt: skip
 

@@ -183,14 +183,16 @@ def test_casimirs_at_rounding_over_many_steps(N: int, omega: float, h: float, n_
     sol = iso.solve(prob, iso.IsoMP(), Q0, dt=h, n_steps=n_steps, save_every=n_steps // 4)
     assert sol.stats.runner.startswith("compiled")
     d = sol.diagnostics
-    assert d.casimir_drift.max() <= 1e-12  # eigenvalues, relative to ||Q0||
+    # "to rounding": at most one unit of rounding per step, relative to the invariant's scale
+    budget = n_steps * np.finfo(float).eps  # 2.2e-12 for 10^4 steps
+    assert d.casimir_drift.max() <= budget  # eigenvalues, relative to ||Q0||
     C = sphere.casimirs(sol.ys)  # int (omega + f)^k, k = 2..6
     lam = np.max(np.abs(sphere.vorticity_levels(Q0)))
     scale = 4 * np.pi * lam ** np.arange(2, 7)
-    assert np.max(np.abs(C - C[0]) / scale) <= 1e-12
-    assert d.invariant_drift["enstrophy"] <= 1e-12 * sphere.enstrophy(Q0)
+    assert np.max(np.abs(C - C[0]) / scale) <= budget
+    assert d.invariant_drift["enstrophy"] <= budget * sphere.enstrophy(Q0)
     key = "angular_momentum" if omega == 0 else "angular_momentum_z"
-    assert np.max(d.invariant_drift[key]) <= 1e-12  # the momentum map, to rounding
+    assert np.max(d.invariant_drift[key]) <= budget  # the momentum map, to rounding
     assert d.hamiltonian_relative_drift <= 1e-2  # bounded O(h^2), not rounding
 
 

@@ -14,7 +14,10 @@ import isoflow as iso
 
 SRC = Path(iso.__file__).resolve().parent
 #: Modules that ``import isoflow`` (and the command line before it runs a command) must not load.
-HEAVY = ("h5py", "matplotlib", "numba", "tqdm", "ducc0", "xarray", "scipy.integrate")
+HEAVY = (
+    "h5py", "matplotlib", "numba", "tqdm", "ducc0", "xarray", "scipy.integrate", "dask",
+    "distributed",
+)  # fmt: skip
 
 #: Known import edges that close a cycle, each with the reason it is still there.
 ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
@@ -33,6 +36,7 @@ def _loaded_after(code: str) -> list[str]:
         "import isoflow",
         "import isoflow.cli; isoflow.cli._build_parser()",
         "import isoflow.registry",
+        "import isoflow as iso; iso.sweep; import isoflow.sweep.spec",  # dask loads when run
     ],
 )
 def test_import_is_light(code: str) -> None:
@@ -45,7 +49,16 @@ def test_lazy_attributes_load_on_use() -> None:
     loaded = _loaded_after("import isoflow as iso; iso.io; iso.models.rigid_body; iso.__version__")
     assert "h5py" in loaded and "isoflow.models.rigid_body" in loaded
     assert "matplotlib" not in loaded
-    for name in ("io", "experiments", "plotting", "registry", "sphere", "threads", "models"):
+    for name in (
+        "io",
+        "experiments",
+        "plotting",
+        "registry",
+        "sphere",
+        "sweep",
+        "threads",
+        "models",
+    ):
         assert name in dir(iso) and name in iso.__all__
     with pytest.raises(AttributeError, match="no attribute 'nonexistent'"):
         iso.nonexistent  # noqa: B018
@@ -153,7 +166,8 @@ def test_the_cycle_finder_finds_cycles() -> None:
 def test_layers_depend_one_way() -> None:
     graph = import_graph()
     experiments = {m for m in graph if m.startswith("isoflow.experiments")}
-    app = {"isoflow.cli", "isoflow.plotting", "isoflow.registry", *experiments}
+    sweep = {m for m in graph if m.startswith("isoflow.sweep")}
+    app = {"isoflow.cli", "isoflow.plotting", "isoflow.registry", *experiments, *sweep}
     for m in experiments:
         assert "isoflow.plotting" not in graph[m] and "isoflow.cli" not in graph[m], m
     assert not experiments & graph["isoflow.plotting"] - {"isoflow.experiments"}

@@ -263,3 +263,80 @@ def test_experiment_names() -> None:
         assert registry.get_experiment(name) is experiment
     with pytest.raises(ConfigError, match="unknown experiment"):
         registry.get_experiment("spin-chain-errors")
+
+
+# ---- parameters that only set the initial state (ModelSpec.initial, used by sweeps) ------------
+
+#: Small sizes, and for each initial-data parameter a value other than the base one.
+_INITIAL_CASES = {
+    "rigid-body": ({"n": 4}, {}),
+    "brockett": ({"n": 4}, {"seed": 3, "scale": 2.5}),
+    "toda": ({"n": 5}, {"seed": 3}),
+    "spin-chain": ({"N": 6, "initial": "random"}, {"initial": "curve", "seed": 3}),
+    "hyperbolic-vortices": ({}, {}),
+    "spin-lattice": ({"shape": [3, 4]}, {"initial": "ferro", "seed": 3}),
+    "euler-sphere": (
+        {"N": 6},
+        {"seed": 3, "lmin": 2, "lmax": 4, "slope": -1.0, "rms": 2.0},
+    ),
+}
+
+
+def _same_value(a: object, b: object) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return bool(np.array_equal(np.asarray(a), np.asarray(b)))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        return len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b, strict=True))
+    if callable(a) and callable(b):
+        return a is b or getattr(a, "__qualname__", 1) == getattr(b, "__qualname__", 2)
+    return bool(a == b)
+
+
+def _same_dynamics(p: iso.IsospectralProblem, q: iso.IsospectralProblem, rng) -> bool:
+    """``B``, ``H``, the invariants and the kernel of two problems agree (at random states)."""
+    if p.algebra.name != q.algebra.name or (p.kernel is None) != (q.kernel is None):
+        return False
+    if p.kernel is not None and not (
+        type(p.kernel) is type(q.kernel) and _same_value(vars(p.kernel), vars(q.kernel))
+    ):
+        return False
+    if set(p.invariants) != set(q.invariants) or (p.hamiltonian is None) != (q.hamiltonian is None):
+        return False
+    for _ in range(2):
+        W = p.algebra.random(rng)
+        if not np.array_equal(p.evaluate_B(W), q.evaluate_B(W)):
+            return False
+        if p.hamiltonian is not None and not np.array_equal(p.hamiltonian(W), q.hamiltonian(W)):
+            return False
+        for k in p.invariants:
+            if not np.array_equal(p.invariants[k](W), q.invariants[k](W)):
+                return False
+    return True
+
+
+@pytest.mark.parametrize("name", sorted(registry.MODELS))
+def test_initial_parameters_change_only_the_initial_state(name: str) -> None:
+    spec = registry.MODELS[name]
+    base, changed = _INITIAL_CASES[name]
+    assert set(changed) == set(spec.initial), "every initial-data parameter is exercised"
+    p0, y0 = spec.make(base)
+    for key, value in changed.items():
+        p1, y1 = spec.make(base | {key: value})
+        assert not np.array_equal(np.asarray(y0), np.asarray(y1)), f"{key} does not change y0"
+        rng = np.random.default_rng(0)
+        assert _same_dynamics(p0, p1, rng), f"{name}: {key} changes the dynamics"
+
+
+@pytest.mark.parametrize(
+    ("name", "base", "key", "value"),
+    [("brockett", {"n": 4}, "n", 5), ("euler-sphere", {"N": 6}, "omega", 1.0),
+     ("spin-lattice", {"shape": [3, 4]}, "J", 2.0), ("hyperbolic-vortices", {}, "config", 2)],
+)  # fmt: skip
+def test_the_dynamics_check_can_fail(name: str, base: dict, key: str, value: object) -> None:
+    spec = registry.MODELS[name]
+    assert key not in spec.initial
+    p0, _ = spec.make(base)
+    p1, _ = spec.make(base | {key: value})
+    assert not _same_dynamics(p0, p1, np.random.default_rng(0))

@@ -11,8 +11,9 @@ symplectic method for isospectral flows*. Quick start::
 Importing the package loads the numerical core only (spaces, problems, methods, solvers, the
 time loop, diagnostics). The rest loads on first use (PEP 562): ``iso.models``, ``iso.sphere``,
 ``iso.threads``, ``iso.io`` (HDF5), ``iso.registry``, ``iso.experiments``, ``iso.plotting``
-(matplotlib) and ``iso.reference_solution`` (SciPy's integrators); numba loads when a run
-first takes a compiled path.
+(matplotlib), ``iso.sweep`` (sweeps on dask.distributed; callable as
+``iso.sweep("sweep.toml", "out")``) and ``iso.reference_solution`` (SciPy's integrators); numba
+loads when a run first takes a compiled path.
 """
 
 from __future__ import annotations
@@ -63,13 +64,14 @@ if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
     from . import plotting as plotting
     from . import registry as registry
     from . import sphere as sphere
+    from . import sweep as sweep
     from . import threads as threads
     from ._version import __version__ as __version__
     from .reference import reference_solution as reference_solution
 
 #: Submodules loaded on first attribute access.
 _LAZY_MODULES = frozenset(
-    {"experiments", "io", "models", "plotting", "registry", "sphere", "threads"}
+    {"experiments", "io", "models", "plotting", "registry", "sphere", "sweep", "threads"}
 )
 #: Attributes loaded on first access: name -> (module, attribute).
 _LAZY_ATTRIBUTES = {
@@ -138,5 +140,6 @@ __all__ = [
     "solve",
     "sphere",
     "step",
+    "sweep",
     "threads",
 ]

@@ -95,36 +95,11 @@ def elementwise(W, out, C):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def elementwise_in_frame(W, out, C, U, Uh):  # type: ignore[no-untyped-def]
-    r"""``out = U (C \circ (U^\dagger W U)) U^\dagger`` (written-out products, any dtypes)."""
-    n = W.shape[0]
-    A = np.zeros((n, n), dtype=out.dtype)
-    for i in range(n):  # A = Uh W
-        for k in range(n):
-            a = Uh[i, k]
-            for j in range(n):
-                A[i, j] += a * W[k, j]
-    Bm = np.zeros((n, n), dtype=out.dtype)
-    for i in range(n):  # Bm = C * (A U)
-        for k in range(n):
-            a = A[i, k]
-            for j in range(n):
-                Bm[i, j] += a * U[k, j]
-        for j in range(n):
-            Bm[i, j] *= C[i, j]
-    for i in range(n):  # A = U Bm
-        for j in range(n):
-            A[i, j] = 0.0
-        for k in range(n):
-            a = U[i, k]
-            for j in range(n):
-                A[i, j] += a * Bm[k, j]
-    for i in range(n):  # out = A Uh
-        for j in range(n):
-            out[i, j] = 0.0
-        for k in range(n):
-            a = A[i, k]
-            for j in range(n):
-                out[i, j] += a * Uh[k, j]
+    r"""``out = U (C \circ (U^\dagger W U)) U^\dagger`` (the frame in ``W``'s dtype)."""
+    Ut = U.astype(W.dtype)
+    Uht = Uh.astype(W.dtype)
+    A = np.dot(np.dot(Uht, W), Ut) * C
+    out[:, :] = np.dot(np.dot(Ut, A), Uht)
 
 
 @numba.njit(cache=True)
@@ -138,64 +113,59 @@ def neighbour_sum(W, out, c):  # type: ignore[no-untyped-def]
             out[i, a] = c * (W[im, a] + W[ip, a])
 
 
-@numba.njit(cache=True, error_model="numpy")
-def vortex_sphere(W, out, circ, c):  # type: ignore[no-untyped-def]
-    r"""``out_i = c \sum_{j \ne i} \Gamma_j w_j / (1 - w_i \cdot w_j)`` on ``(N, 3)``.
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def pair_field(X, B, circ, c, N, lorentz):  # type: ignore[no-untyped-def]
+    r"""The pair sum :math:`B_i = c \sum_{j \ne i} \Gamma_j\, q(D_{ij})\, x_j` on flat
+    ``(3N,)`` arrays: :math:`q(D) = 1/(1 - D)` with the Euclidean dot, or (``lorentz``)
+    :math:`q(D) = 1/((D - 1)(D + 1))` with :math:`D = x_i \cdot_L x_j`.
 
-    One pass over the pairs ``i < j`` (the factor is symmetric); each ``out_i`` sums its terms
+    One pass over the pairs ``i < j`` (the factor is symmetric); each ``B_i`` sums its terms
     in the order ``j = 0, 1, ..., N-1``. A coinciding pair gives ``inf`` (then ``non_finite``).
+    The one statement of the vortex fields: the kernel's fields below and the fused compiled
+    stages (:mod:`isoflow._compiled.vortices`) use it.
     """
-    N = W.shape[0]
+    for k in range(3 * N):
+        B[k] = 0.0
     for i in range(N):
-        out[i, 0] = 0.0
-        out[i, 1] = 0.0
-        out[i, 2] = 0.0
-    for i in range(N):
-        xi0, xi1, xi2 = W[i, 0], W[i, 1], W[i, 2]
+        p = 3 * i
+        xi0, xi1, xi2 = X[p], X[p + 1], X[p + 2]
         gi = circ[i]
-        s0, s1, s2 = out[i, 0], out[i, 1], out[i, 2]
+        s0, s1, s2 = B[p], B[p + 1], B[p + 2]
         for j in range(i + 1, N):
-            xj0, xj1, xj2 = W[j, 0], W[j, 1], W[j, 2]
-            q = 1.0 / (1.0 - (xi0 * xj0 + xi1 * xj1 + xi2 * xj2))
+            r = 3 * j
+            xj0, xj1, xj2 = X[r], X[r + 1], X[r + 2]
+            if lorentz:
+                d = xi0 * xj0 + xi1 * xj1 - xi2 * xj2
+                q = 1.0 / ((d - 1.0) * (d + 1.0))
+            else:
+                q = 1.0 / (1.0 - (xi0 * xj0 + xi1 * xj1 + xi2 * xj2))
             a = circ[j] * q
             s0 += a * xj0
             s1 += a * xj1
             s2 += a * xj2
             a = gi * q
-            out[j, 0] += a * xi0
-            out[j, 1] += a * xi1
-            out[j, 2] += a * xi2
-        out[i, 0] = c * s0
-        out[i, 1] = c * s1
-        out[i, 2] = c * s2
+            B[r] += a * xi0
+            B[r + 1] += a * xi1
+            B[r + 2] += a * xi2
+        B[p] = c * s0
+        B[p + 1] = c * s1
+        B[p + 2] = c * s2
+
+
+@numba.njit(cache=True, error_model="numpy")
+def vortex_sphere(W, out, circ, c):  # type: ignore[no-untyped-def]
+    r"""``out_i = c \sum_{j \ne i} \Gamma_j w_j / (1 - w_i \cdot w_j)`` on ``(N, 3)``."""
+    N = W.shape[0]
+    flat = np.empty(3 * N)  # any layouts of W and out: the pair sum runs on flat copies
+    pair_field(np.ascontiguousarray(W).ravel(), flat, circ, c, N, False)
+    out[:, :] = flat.reshape(N, 3)
 
 
 @numba.njit(cache=True, error_model="numpy")
 def vortex_hyperbolic(W, out, circ, c):  # type: ignore[no-untyped-def]
     r"""``out_i = c \sum_{j \ne i} \Gamma_j w_j / ((D_{ij} - 1)(D_{ij} + 1))``,
-    :math:`D_{ij} = w_i \cdot_L w_j`, on ``(N, 3)`` (pairs ``i < j`` once, as
-    :func:`vortex_sphere`)."""
+    :math:`D_{ij} = w_i \cdot_L w_j`, on ``(N, 3)``."""
     N = W.shape[0]
-    for i in range(N):
-        out[i, 0] = 0.0
-        out[i, 1] = 0.0
-        out[i, 2] = 0.0
-    for i in range(N):
-        xi0, xi1, xi2 = W[i, 0], W[i, 1], W[i, 2]
-        gi = circ[i]
-        s0, s1, s2 = out[i, 0], out[i, 1], out[i, 2]
-        for j in range(i + 1, N):
-            xj0, xj1, xj2 = W[j, 0], W[j, 1], W[j, 2]
-            d = xi0 * xj0 + xi1 * xj1 - xi2 * xj2
-            q = 1.0 / ((d - 1.0) * (d + 1.0))
-            a = circ[j] * q
-            s0 += a * xj0
-            s1 += a * xj1
-            s2 += a * xj2
-            a = gi * q
-            out[j, 0] += a * xi0
-            out[j, 1] += a * xi1
-            out[j, 2] += a * xi2
-        out[i, 0] = c * s0
-        out[i, 1] = c * s1
-        out[i, 2] = c * s2
+    flat = np.empty(3 * N)  # any layouts of W and out: the pair sum runs on flat copies
+    pair_field(np.ascontiguousarray(W).ravel(), flat, circ, c, N, True)
+    out[:, :] = flat.reshape(N, 3)

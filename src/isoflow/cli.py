@@ -7,7 +7,9 @@ Commands:
   :mod:`isoflow.registry` (built in, registered by an installed package, or your own
   ``--model package.module:factory``) streamed to an HDF5 result file; ``isoflow run --resume
   FILE`` continues a stopped or killed run bit for bit;
-* ``isoflow info FILE``: what a result file holds, its parameters and invariant drifts;
+* ``isoflow info FILE``: what a result file holds, its parameters and invariant drifts (or a
+  sweep directory: its tasks, failed members and worst drifts);
+* ``isoflow sweep SWEEP.toml --out DIR``: a sweep of :mod:`isoflow.sweep` on dask.distributed;
 * ``isoflow plot FILE --out PNG``: invariants and state components from a result file;
 * ``isoflow reproduce NAME|all --out DIR [--quick]``: the paper's experiments, figures and JSON;
 * ``isoflow list [models|methods|solvers|experiments]``: the names the other commands take;
@@ -210,12 +212,14 @@ def _build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_run, computes=True)
 
     info = sub.add_parser("info", help="describe a result file: parameters and invariant drifts")
-    info.add_argument("file", help="an isoflow result file (HDF5)")
+    info.add_argument("file", help="an isoflow result file (HDF5) or a sweep directory")
     info.add_argument("--json", action="store_true", help="print JSON")
     info.add_argument(
         "--verify", action="store_true", help="also check every saved state's checksum"
     )
     info.set_defaults(func=_info, computes=False)
+
+    _add_sweep_parser(sub)
 
     plot = sub.add_parser("plot", help="plot invariants and states from a result file")
     plot.add_argument("file", help="an isoflow result file (HDF5)")
@@ -489,6 +493,9 @@ def _run(args: argparse.Namespace) -> int:
 def _info(args: argparse.Namespace) -> int:
     from . import io
 
+    if Path(args.file).is_dir():
+        return _info_sweep(args)
+
     data = io.info(args.file, verify_states=args.verify)
     if args.json:
         print(json.dumps(data, indent=2))
@@ -521,6 +528,79 @@ def _info(args: argparse.Namespace) -> int:
             f"(iterations mean {st.get('iterations_mean', float('nan')):.2f})"
         )
     lines += [f"  {k:<24} {v:.3e}" for k, v in data["drifts"].items()]
+    print("\n".join(lines))
+    return 0
+
+
+# ---- sweeps (isoflow.sweep) ---------------------------------------------------------------------
+
+
+def _add_sweep_parser(sub: Any) -> None:
+    sw = sub.add_parser(
+        "sweep",
+        help="run a sweep (sweep.toml: a model, a method, a table of members) on dask",
+        description=(
+            "Run the members of a sweep file as batched ensembles in dask workers, each task "
+            "streamed to DIR/tasks/<id>.h5; run it again to resume. Needs isoflow[sweep]."
+        ),
+    )
+    sw.add_argument("file", help="the sweep file (TOML; see the isoflow.sweep docstring)")
+    sw.add_argument("--out", metavar="DIR", help="the sweep directory (default: the file's out)")
+    where = sw.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers", type=_positive_int, metavar="K", help="local worker processes (default: cores)"
+    )
+    where.add_argument("--scheduler", metavar="ADDR", help="a running dask scheduler to use")
+    sw.add_argument(
+        "--retries", type=int, default=2, metavar="R", help="worker deaths a task survives (2)"
+    )
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.set_defaults(func=_sweep, computes=False)
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from .sweep import read_spec, sweep
+
+    spec = read_spec(args.file)
+    result = sweep(
+        spec,
+        args.out,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        retries=args.retries,
+        progress=not args.quiet,
+    )
+    print(result)
+    for tid, msg in result.errors.items():
+        print(f"  task {tid} raised: {msg}")
+    if result.failed_members:
+        print(f"  failed members: {', '.join(map(str, result.failed_members))} (isoflow info DIR)")
+    return 1 if result.errors else 0
+
+
+def _info_sweep(args: argparse.Namespace) -> int:
+    from .sweep import status
+
+    data = status(args.file)
+    if args.json:
+        print(json.dumps(data, indent=2))
+        return 0
+    run = data["run"]
+    lines = [
+        f"{data['path']}: isoflow sweep, model {data['model']}, method {run.get('method')}",
+        f"  {'time grid':<24} t0 = {run['t0']:g}, dt = {run['dt']:g}, {run['n_steps']} steps, "
+        f"save every {run['save_every']}",
+        f"  {'members':<24} {data['members']} in {data['tasks']} task"
+        + ("" if data["tasks"] == 1 else "s")
+        + ("" if data["perturb"] is None else f" (perturb {data['perturb']:g})"),
+        f"  {'tasks':<24} {data['done']} done, {data['partial']} partial, "
+        f"{data['pending']} not started",
+    ]
+    for tid, msg in data["errors"].items():
+        lines.append(f"  {'task ' + tid:<24} raised: {msg}")
+    for i, f in data["failed_members"].items():
+        lines.append(f"  {'member ' + i:<24} failed at step {f['step']}: {f['message']}")
+    lines += [f"  {k:<24} {v:.3e} (worst finished member)" for k, v in data["drifts"].items()]
     print("\n".join(lines))
     return 0
 

@@ -38,6 +38,14 @@ def _title(run: Any) -> str:
     return title + ("" if run.complete else " (incomplete)")
 
 
+def _component(run: Any, idx: tuple[int, ...]) -> str:
+    """Name of one state entry: ``w_3.x`` for particles, ``W[1, 2]`` for matrices."""
+    if "R^3" in str(run.meta.get("algebra", "")) and idx:
+        *rest, c = idx
+        return f"w_{','.join(map(str, rest))}.{'xyz'[c]}"
+    return f"W[{', '.join(map(str, idx))}]"
+
+
 def plot_run(run: Any) -> Figure:
     """Invariants and state components of a result file (:class:`isoflow.io.RunData`).
 
@@ -83,10 +91,14 @@ def plot_run(run: Any) -> Figure:
         plot_variation(axes[2], ts, dist, lw=0.8, ylabel="distance",
                        labels=["distance to V"] if dist.shape[1] == 1 else None)  # fmt: skip
         axes[2].set_title("distance to the space V")
-    Y = np.real(run.ys).reshape(len(ts), -1)
-    pick: Any = np.flatnonzero(np.std(Y, axis=0) > 0)[:6] if Y.size else []
-    for j in pick:
-        axes[3].plot(ts, Y[:, j], lw=0.8, label=f"y[{j}] (flat index)")
+    ys = np.asarray(run.ys)
+    parts = [("Re ", np.real(ys)), ("Im ", np.imag(ys))] if np.iscomplexobj(ys) else [("", ys)]
+    curves = [(f"{part}{_component(run, idx)}", y[(slice(None), *idx)])
+              for part, y in parts for idx in np.ndindex(ys.shape[1:])]  # fmt: skip
+    moving = [(label, y) for label, y in curves if np.std(y) > 0][:6]
+    for label, y in moving:
+        axes[3].plot(ts, y, lw=0.8, label=label)
+    pick = moving
     axes[3].set_title("state components (first six that move)")
     if len(pick):
         axes[3].legend(fontsize=7)

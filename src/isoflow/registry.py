@@ -211,6 +211,10 @@ class ModelSpec:
         One line.
     builtin : bool
         Part of isoflow. Only built-in models are rebuilt from a file's configuration alone.
+    initial : tuple of str
+        The parameters that only set the initial state (seeds, amplitudes of random data):
+        members of a sweep that differ only in them share ``B``, ``H``, the invariants and the
+        kernel, so they run as one ensemble (:mod:`isoflow.sweep`).
 
     A package registers a model by pointing an entry point of the group ``isoflow.models`` at
     such an object (typed parameters, bounds, help) or at a plain factory function.
@@ -221,6 +225,7 @@ class ModelSpec:
     params: Mapping[str, Param] | None = None
     description: str = ""
     builtin: bool = False
+    initial: tuple[str, ...] = ()
 
     def function(self) -> Callable[..., Any]:
         """The factory function (imported if given by name)."""
@@ -289,6 +294,7 @@ MODELS: dict[str, ModelSpec] = {
             },
             "Brockett double bracket flow, N = diag(1..n) (Sec. 3.2)",
             builtin=True,
+            initial=("seed", "scale"),
         ),
         ModelSpec(
             "toda",
@@ -299,6 +305,7 @@ MODELS: dict[str, ModelSpec] = {
             },
             "non-periodic Toda lattice on sym(n), Flaschka form",
             builtin=True,
+            initial=("seed",),
         ),
         ModelSpec(
             "spin-chain",
@@ -312,6 +319,7 @@ MODELS: dict[str, ModelSpec] = {
             },
             "periodic Heisenberg spin chain on (R^3, x)^N (Sec. 3.3)",
             builtin=True,
+            initial=("initial", "seed"),
         ),
         ModelSpec(
             "hyperbolic-vortices",
@@ -335,6 +343,7 @@ MODELS: dict[str, ModelSpec] = {
             },
             "classical Heisenberg/XXZ spins with a Zeeman field on a periodic square lattice",
             builtin=True,
+            initial=("initial", "seed"),
         ),
         ModelSpec(
             "euler-sphere",
@@ -357,6 +366,7 @@ MODELS: dict[str, ModelSpec] = {
             },
             "Zeitlin's quantized Euler equations on the (rotating) sphere, su(N)",
             builtin=True,
+            initial=("seed", "lmin", "lmax", "slope", "rms"),
         ),
     )
 }
@@ -402,7 +412,9 @@ def _entry_points() -> dict[str, importlib.metadata.EntryPoint]:
 def _spec_from(obj: Any, name: str) -> ModelSpec:
     """A :class:`ModelSpec` from what an entry point or an import path names."""
     if isinstance(obj, ModelSpec):
-        return ModelSpec(name, obj.factory, obj.params, obj.description, builtin=False)
+        return ModelSpec(
+            name, obj.factory, obj.params, obj.description, builtin=False, initial=obj.initial
+        )
     if callable(obj):
         doc = (getattr(obj, "__doc__", None) or "").strip().splitlines()
         return ModelSpec(name, obj, None, doc[0] if doc else "", builtin=False)

@@ -228,6 +228,8 @@ def run_block(  # type: ignore[no-untyped-def]
             row += 1
 
 
+# Serial and parallel drivers are twins on purpose (numba's cache does not key on
+# ``parallel=``; see :mod:`.driver`): one body compiled both ways would share a cache entry.
 def drive_blocks_serial(  # type: ignore[no-untyped-def]
     Wb, ring, hn, coefs, kmax, coeff, s, traceless, valid,
     h, nsteps, k0, save_every, k_final, out,

@@ -174,6 +174,15 @@ def _load_t(A, bi, ie, bj, je, buf):  # type: ignore[no-untyped-def]
             buf[i - bi, j - bj] = A[j, i]
 
 
+@numba.njit(cache=True, inline="always")
+def _store_t(buf, A, bi, ie, bj):  # type: ignore[no-untyped-def]
+    """``A[bj + jj, bi + ii] = buf[ii, jj]``: the transposed tile written back row by row."""
+    for jj in range(_TILE):
+        dst = A[bj + jj, bi:ie]
+        for ii in range(ie - bi):
+            dst[ii] = buf[ii, jj]
+
+
 @numba.njit(cache=True, fastmath=_FM)
 def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyped-def]
     """``G = W + half (P + sigma(P)) - quarter T'`` on the lower triangle, mirrored into ``V``
@@ -209,10 +218,7 @@ def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyp
                     gt_row[jj] = s * g.conjugate()
                     d = g - x_row[jj]
                     rr += 2.0 * (d.real * d.real + d.imag * d.imag)
-            for jj in range(_TILE):
-                dst = G[bj + jj, bi:ie]
-                for ii in range(ie - bi):
-                    dst[ii] = GT[ii, jj]
+            _store_t(GT, G, bi, ie, bj)
         for i in range(bi, ie):  # the diagonal tile
             o = rowoff[i]
             for j in range(bi, i):
@@ -265,7 +271,11 @@ def iterate_blas(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: igno
 @numba.njit(cache=True, fastmath=_FM)
 def finish_blas(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
     """``Wn = Pi_V(W + h (P + sigma(P)))`` with ``P = B X`` in ``aux``, computed on the lower
-    triangle and mirrored tile by tile; returns whether ``Wn`` is finite."""
+    triangle and mirrored tile by tile; returns whether ``Wn`` is finite.
+
+    The tile traversal is :func:`_combine`'s on purpose, with another body: passing the body
+    as a function argument would cost the inlining that lets the row loops vectorize.
+    """
     n = sp[0]
     s = sp[1]
     Wm = W.reshape((n, n))
@@ -291,10 +301,7 @@ def finish_blas(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untype
                     o_row[jj] = v
                     vt_row[jj] = s * v.conjugate()
                     acc += abs(v.real) + abs(v.imag)
-            for jj in range(_TILE):
-                dst = Wo[bj + jj, bi:ie]
-                for ii in range(ie - bi):
-                    dst[ii] = VT[ii, jj]
+            _store_t(VT, Wo, bi, ie, bj)
         for i in range(bi, ie):  # the diagonal tile
             for j in range(bi, i + 1):
                 v = Wm[i, j] + h * (P[i, j] + s * P[j, i].conjugate())

@@ -105,17 +105,24 @@ def iterate_sl2(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignor
 
 
 @numba.njit(cache=True, inline="always")
+def spherical_factor(w0, w1, w2, a0, a1, a2):  # type: ignore[no-untyped-def]
+    """The factor ``sqrt(|w| |2a - w|) / |a|`` that puts the midpoint ``a`` of ``w`` on the
+    spherical midpoint's sphere (``0`` where ``a = 0``)."""
+    nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    v0, v1, v2 = 2.0 * a0 - w0, 2.0 * a1 - w1, 2.0 * a2 - w2
+    nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    nm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    return math.sqrt(nw * nv) / nm if nm > 0 else 0.0
+
+
+@numba.njit(cache=True, inline="always")
 def spherical_point(W, M, mid, N):  # type: ignore[no-untyped-def]
     """``mid_i = sqrt(|w_i| |2M_i - w_i|) M_i / |M_i|`` (``0`` where ``M_i = 0``), flat."""
     for i in range(N):
         j = 3 * i
         w0, w1, w2 = W[j], W[j + 1], W[j + 2]
         a0, a1, a2 = M[j], M[j + 1], M[j + 2]
-        nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        v0, v1, v2 = 2.0 * a0 - w0, 2.0 * a1 - w1, 2.0 * a2 - w2
-        nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        nm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        fac = math.sqrt(nw * nv) / nm if nm > 0 else 0.0
+        fac = spherical_factor(w0, w1, w2, a0, a1, a2)
         mid[j] = fac * a0
         mid[j + 1] = fac * a1
         mid[j + 2] = fac * a2

@@ -37,17 +37,7 @@ from ..methods import composition as _composition
 from ..methods.isomp import extrapolation_weights
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
-from . import blocked, dense, particles, spin_chain, vortices
-from .driver import (
-    REC_FAIL_ITERATIONS,
-    REC_FAIL_RESIDUAL,
-    REC_FAIL_STATUS,
-    REC_FAIL_STEP,
-    REC_ITERATIONS,
-    REC_ITERATIONS_MAX,
-    REC_RESIDUAL_MAX,
-    REC_SIZE,
-)
+from . import blocked, dense, driver, particles, spin_chain, vortices
 from .rules import ANDERSON_REGULARIZATION
 
 __all__ = ["CompiledRunner", "Layout", "compiled_runner", "sigma_sign"]
@@ -338,8 +328,10 @@ class CompiledRunner(Runner):
         self.head = np.zeros((self.M, P), dtype=np.int64)
         self.nh = np.zeros((self.M, P), dtype=np.int64)
         self._load_offsets(method_state)
-        self.rec = np.zeros((self.M, REC_SIZE))
-        self.rec[:, REC_FAIL_STEP] = np.where(self.failures.step >= 0, self.failures.step + 1, -1)
+        self.rec = np.zeros((self.M, driver.REC_SIZE))
+        self.rec[:, driver.REC_FAIL_STEP] = np.where(
+            self.failures.step >= 0, self.failures.step + 1, -1
+        )
         self.parallel = self.M >= 2 and _threads() > 1 and self._threads_allowed()
         self.compile_seconds = 0.0
         self._drive: Any = None
@@ -457,21 +449,46 @@ class CompiledRunner(Runner):
                 self.ring[:, p, q] = L.to_flat(user[p, q])
         self._user = (self.k, y, user)
 
-    def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
-        from .notice import compile_notice
-
-        L = self.layout
+    def _rows_buffer(self, out: Array) -> Array:
+        """Where the driver writes the saved rows: ``out`` itself when the layout is the
+        user's and ``out`` is contiguous, else a flat buffer (see :meth:`_finish`). Also
+        clears the per-call counters of the member records."""
         R = out.shape[0]
-        direct = L.identity and out.flags.c_contiguous
-        if direct:
-            buf = out.reshape(R, self.M, self.S)
+        rec = self.rec
+        rec[:, driver.REC_ITERATIONS] = 0.0
+        rec[:, driver.REC_ITERATIONS_MAX] = 0.0
+        rec[:, driver.REC_RESIDUAL_MAX] = 0.0
+        if self.layout.identity and out.flags.c_contiguous:
+            return out.reshape(R, self.M, self.S)
+        return np.empty((R, self.M, self.S), self.W.dtype)
+
+    def _call(self, drive: Any, args: tuple[Any, ...], what: str) -> None:
+        """Run the compiled ``drive`` on ``args``; the first call compiles it (timed, with
+        the compile notice), later calls reuse it."""
+        if self._drive is None:
+            from .notice import compile_notice
+
+            start = time.perf_counter()
+            with compile_notice(what):
+                drive = drive()
+                drive(*args)
+            self._drive = drive
+            self.compile_seconds = time.perf_counter() - start
         else:
-            buf = np.empty((R, self.M, self.S), self.W.dtype)
+            self._drive(*args)
+
+    def _finish(self, out: Array, buf: Array, nsteps: int) -> None:
+        """Copy the rows from ``buf`` into ``out`` in the user's layout (unless the driver
+        wrote them there) and take in the member records of the ``nsteps`` just run."""
+        if out.shape[0] and not np.may_share_memory(out, buf):
+            out[...] = self.layout.from_flat(buf)
+        self._absorb(nsteps)
+
+    def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+        L = self.layout
+        buf = self._rows_buffer(out)
         s = self.solver
         rec = self.rec
-        rec[:, REC_ITERATIONS] = 0.0
-        rec[:, REC_ITERATIONS_MAX] = 0.0
-        rec[:, REC_RESIDUAL_MAX] = 0.0
         args = (
             L.iterate, L.finish, self.f, self.fargs, L.sp, L.nwork,
             self.W, self.ring, self.head, self.nh, self.coefs, self.kmax, self.gammas,
@@ -479,32 +496,23 @@ class CompiledRunner(Runner):
             float(s.rtol), float(s.atol), float(s.stall_rtol), float(s.divergence_factor),
             int(s.max_iter), int(s.anderson), ANDERSON_REGULARIZATION, rec,
         )  # fmt: skip
-        if self._drive is None:
-            start = time.perf_counter()
-            with compile_notice(f"{L.name} with {getattr(self.f, '__name__', 'B')}"):
-                self._drive = self._driver()
-                self._drive(*args)
-            self.compile_seconds = time.perf_counter() - start
-        else:
-            self._drive(*args)
-        if not direct and R:
-            out[...] = L.from_flat(buf)
-        self._absorb(nsteps)
+        self._call(self._driver, args, f"{L.name} with {getattr(self.f, '__name__', 'B')}")
+        self._finish(out, buf, nsteps)
 
     def _absorb(self, nsteps: int) -> None:
         rec = self.rec
         f = self.failures
-        newly = np.flatnonzero((rec[:, REC_FAIL_STEP] >= 0) & (f.step < 0))
+        newly = np.flatnonzero((rec[:, driver.REC_FAIL_STEP] >= 0) & (f.step < 0))
         for m in newly:
             f.record(  # the driver counts steps from 1: step k goes from t_{k-1}
-                int(m), int(rec[m, REC_FAIL_STEP]) - 1, int(rec[m, REC_FAIL_STATUS]),
-                int(rec[m, REC_FAIL_ITERATIONS]), float(rec[m, REC_FAIL_RESIDUAL]),
+                int(m), int(rec[m, driver.REC_FAIL_STEP]) - 1, int(rec[m, driver.REC_FAIL_STATUS]),
+                int(rec[m, driver.REC_FAIL_ITERATIONS]), float(rec[m, driver.REC_FAIL_RESIDUAL]),
             )  # fmt: skip
-        its = int(rec[:, REC_ITERATIONS].sum())
+        its = int(rec[:, driver.REC_ITERATIONS].sum())
         self.iterations_total += its
         self.b_evaluations += its
-        self.iterations_max = max(self.iterations_max, int(rec[:, REC_ITERATIONS_MAX].max()))
-        self.residual_max = max(self.residual_max, float(rec[:, REC_RESIDUAL_MAX].max()))
+        self.iterations_max = max(self.iterations_max, int(rec[:, driver.REC_ITERATIONS_MAX].max()))
+        self.residual_max = max(self.residual_max, float(rec[:, driver.REC_RESIDUAL_MAX].max()))
         k_end = self.k + nsteps
         if not f.alive.any():  # every member failed: the run ends where the last one failed
             k_end = min(k_end, int(f.step.max()))
@@ -570,20 +578,10 @@ class BlockedRunner(CompiledRunner):
         self._blocks_from_members()
 
     def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
-        from .notice import compile_notice
-
         L = self.layout
-        R = out.shape[0]
-        direct = L.identity and out.flags.c_contiguous
-        if direct:
-            buf = out.reshape(R, self.M, self.S)
-        else:
-            buf = np.empty((R, self.M, self.S), self.W.dtype)
+        buf = self._rows_buffer(out)
         s = self.solver
         rec = self.rec
-        rec[:, REC_ITERATIONS] = 0.0
-        rec[:, REC_ITERATIONS_MAX] = 0.0
-        rec[:, REC_RESIDUAL_MAX] = 0.0
         sp = L.sp
         drive = blocked.drive_blocks_parallel if self.parallel else blocked.drive_blocks_serial
         args = (
@@ -592,17 +590,8 @@ class BlockedRunner(CompiledRunner):
             int(k_final), buf, float(s.rtol), float(s.atol), float(s.stall_rtol),
             float(s.divergence_factor), int(s.max_iter), rec,
         )  # fmt: skip
-        if self._drive is None:
-            start = time.perf_counter()
-            with compile_notice(f"{L.name}, blocked ensembles"):
-                drive(*args)
-            self._drive = drive
-            self.compile_seconds = time.perf_counter() - start
-        else:
-            drive(*args)
-        if not direct and R:
-            out[...] = L.from_flat(buf)
-        self._absorb(nsteps)
+        self._call(lambda: drive, args, f"{L.name}, blocked ensembles")
+        self._finish(out, buf, nsteps)
 
 
 def with_kernel(problem: IsospectralProblem, kernel: Any) -> IsospectralProblem:

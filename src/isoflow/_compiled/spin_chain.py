@@ -27,6 +27,8 @@ import math
 import numba
 import numpy as np
 
+from .particles import spherical_factor
+
 __all__ = [
     "finish_iso",
     "finish_smm",
@@ -79,11 +81,7 @@ def _smm_one(m, X, W, G, N, i, im, ip, c, half):  # type: ignore[no-untyped-def]
 def _point_one(M, W, m, N, i):  # type: ignore[no-untyped-def]
     w0, w1, w2 = W[i], W[N + i], W[2 * N + i]
     a0, a1, a2 = M[i], M[N + i], M[2 * N + i]
-    nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    v0, v1, v2 = 2.0 * a0 - w0, 2.0 * a1 - w1, 2.0 * a2 - w2
-    nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    nm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    f = math.sqrt(nw * nv) / nm if nm > 0 else 0.0
+    f = spherical_factor(w0, w1, w2, a0, a1, a2)
     m[i] = f * a0
     m[N + i] = f * a1
     m[2 * N + i] = f * a2
@@ -112,6 +110,8 @@ def _smm_range(m, X, W, G, N, c, half, lo, hi):  # type: ignore[no-untyped-def]
     return acc
 
 
+# Serial and parallel stages are twins on purpose: a short chain runs the serial one (no
+# thread start-up per iteration), and numba's cache does not key on ``parallel=``.
 # The stages index the flat (3, N) layout directly (component ``a`` of spin ``i`` at
 # ``a * N + i``): no reshaped views, which numba's parallel lowering does not write through.
 @numba.njit(cache=True)

@@ -23,47 +23,17 @@ from __future__ import annotations
 
 import numba
 
+from .._kernel_fields import pair_field
 from .particles import _put, _sl2, _so3, smm_update, spherical_point
 
 __all__ = ["iterate_hyperbolic", "iterate_sphere", "iterate_sphere_smm"]
-
-
-@numba.njit(cache=True, inline="always", error_model="numpy")
-def _pairs(X, B, circ, c, N, lorentz):  # type: ignore[no-untyped-def]
-    """``B`` (flat ``3N``) of the pair field at ``X`` (flat)."""
-    for k in range(3 * N):
-        B[k] = 0.0
-    for i in range(N):
-        p = 3 * i
-        xi0, xi1, xi2 = X[p], X[p + 1], X[p + 2]
-        gi = circ[i]
-        s0, s1, s2 = B[p], B[p + 1], B[p + 2]
-        for j in range(i + 1, N):
-            r = 3 * j
-            xj0, xj1, xj2 = X[r], X[r + 1], X[r + 2]
-            if lorentz:
-                d = xi0 * xj0 + xi1 * xj1 - xi2 * xj2
-                q = 1.0 / ((d - 1.0) * (d + 1.0))
-            else:
-                q = 1.0 / (1.0 - (xi0 * xj0 + xi1 * xj1 + xi2 * xj2))
-            a = circ[j] * q
-            s0 += a * xj0
-            s1 += a * xj1
-            s2 += a * xj2
-            a = gi * q
-            B[r] += a * xi0
-            B[r + 1] += a * xi1
-            B[r + 2] += a * xi2
-        B[p] = c * s0
-        B[p + 1] = c * s1
-        B[p + 2] = c * s2
 
 
 @numba.njit(cache=True, inline="always")
 def _isomp(form, lorentz, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
     N = sp[0]
     B = work[0]
-    _pairs(X, B, fargs[0], fargs[1], N, lorentz)
+    pair_field(X, B, fargs[0], fargs[1], N, lorentz)
     rr = 0.0
     for i in range(N):
         j = 3 * i
@@ -94,5 +64,5 @@ def iterate_sphere_smm(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type
     N = sp[0]
     mid = work[1]
     spherical_point(W, X, mid, N)
-    _pairs(mid, work[0], fargs[0], fargs[1], N, False)
+    pair_field(mid, work[0], fargs[0], fargs[1], N, False)
     return smm_update(W, X, G, aux, work[0], mid, N, half)

@@ -243,14 +243,19 @@ class Algebra(ABC):
         coords = rows @ basis.T if isinstance(basis, np.ndarray) else (basis @ rows.T).T
         return np.asarray(coords).reshape(*flat.shape[:-1], self.dim)
 
-    def from_coords(self, coords: ArrayLike) -> Array:
-        """The element of ``V`` with the given coordinates, shape ``(*batch, *shape)``."""
+    def _coords_array(self, coords: ArrayLike) -> Array:
+        """``coords`` as floats, checked to have a trailing axis of length :attr:`dim`."""
         c = np.asarray(coords, dtype=np.float64)
         if c.shape[-1:] != (self.dim,):
             raise ShapeError(
                 f"coordinates for {self.name} must have trailing axis of length {self.dim}, "
                 f"got shape {c.shape}"
             )
+        return c
+
+    def from_coords(self, coords: ArrayLike) -> Array:
+        """The element of ``V`` with the given coordinates, shape ``(*batch, *shape)``."""
+        c = self._coords_array(coords)
         basis, basis_t = self._coordinate_maps
         rows = c.reshape(-1, self.dim)
         flat = rows @ basis if isinstance(basis, np.ndarray) else (basis_t @ rows.T).T

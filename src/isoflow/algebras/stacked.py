@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 if TYPE_CHECKING:
     import scipy.sparse as sp
 
-from .._errors import ParameterError, ShapeError
+from .._errors import ParameterError
 from ._base import Algebra
 
 __all__ = ["Stacked"]
@@ -83,12 +83,7 @@ class Stacked(Algebra):
         return c.reshape(*c.shape[:-2], self.dim)
 
     def from_coords(self, coords: ArrayLike) -> Array:
-        c = np.asarray(coords, dtype=np.float64)
-        if c.shape[-1:] != (self.dim,):
-            raise ShapeError(
-                f"coordinates for {self.name} must have trailing axis of length {self.dim}, "
-                f"got shape {c.shape}"
-            )
+        c = self._coords_array(coords)
         return self.base.from_coords(c.reshape(*c.shape[:-1], self.copies, self.base.dim))
 
     def _basis_matrix(self) -> sp.csr_array:

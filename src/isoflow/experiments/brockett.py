@@ -116,8 +116,8 @@ class Brockett(Experiment):
         ax2.set_xlabel("t")
         ax2.legend(fontsize=7)
         fig.suptitle(
-            f"Brockett flow on herm({p['n']}), N = diag(1..{p['n']}), IsoMP, h = {p['h']:g}, "
-            f"T = {p['T']:g}, random W0 (seed {p['seed']})"
+            f"Brockett flow on herm({p['n']}), N = diag(1..{p['n']}), IsoMP,\n"
+            f"h = {p['h']:g}, T = {p['T']:g}, random W0 (seed {p['seed']})"
         )
         return fig
 

@@ -96,8 +96,8 @@ class SpinChainEnergy(Experiment):
             ax.set_title(LABELS[key])
         axes[-1].set_xlabel("t")
         fig.suptitle(
-            f"Heisenberg spin chain, N = {p['N']}, the paper's closed curve, h = {p['h']:g}, "
-            f"T = {p['T']:g}: Hamiltonian variation"
+            f"Heisenberg spin chain, N = {p['N']}, the paper's closed curve,\n"
+            f"h = {p['h']:g}, T = {p['T']:g}: Hamiltonian variation"
         )
         return fig
 

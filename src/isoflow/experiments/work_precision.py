@@ -298,7 +298,7 @@ class WorkPrecision(Experiment):
             ax.set_xlabel("t")
             ax.legend(fontsize=8)
         fig.suptitle(
-            "Work and precision: structure-preserving methods against RK4 and DOP853 "
+            "Work and precision: structure-preserving methods against RK4 and DOP853\n"
             f"(long run: h = {long['h']:.3g} over T = {result.summary['parameters']['T_long']:g})"
         )
         return fig

@@ -144,10 +144,15 @@ def _validate_meta(meta: dict[str, Any], p: Path) -> None:
         raise ResultFileError(f"{p}: core shape {core} does not end the state shape {shape}")
     if math.prod(shape) * dtype.itemsize > MAX_STATE_BYTES:
         raise ResultFileError(f"{p}: a state of shape {shape} is too large for a result file")
-    scale = meta.get("casimir_scale", 1.0)
-    flat = scale if isinstance(scale, list) else [scale]
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in flat):
+    if not _numbers(meta.get("casimir_scale", 1.0), depth=8):
         raise ResultFileError(f"{p}: meta field 'casimir_scale' is not numeric")
+
+
+def _numbers(value: Any, depth: int) -> bool:
+    """``value`` is a number or nested lists of numbers (at most ``depth`` deep)."""
+    if isinstance(value, list):
+        return depth > 0 and all(_numbers(v, depth - 1) for v in value)
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _check_truncated(p: Path, head: bytes) -> None:

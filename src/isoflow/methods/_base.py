@@ -8,10 +8,11 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from ..nonlinear import STATUS_CONVERGED, STATUS_NAMES
+from .._errors import ParameterError
+from ..nonlinear import STATUS_CONVERGED, STATUS_NAMES, NonlinearResult, NonlinearSolver
 from ..problems import IsospectralProblem
 
-__all__ = ["Method", "StepResult"]
+__all__ = ["Method", "StepResult", "check_implicit_options"]
 
 Array = NDArray[Any]
 
@@ -39,6 +40,18 @@ class StepResult:
     residual: NDArray[np.float64] | None = None
     status: NDArray[np.int64] | None = None
     state: Any = None
+
+    @classmethod
+    def from_solve(cls, y: Array, res: NonlinearResult, state: Any = None) -> StepResult:
+        """The step to ``y`` whose implicit stage and solve record are those of ``res``."""
+        return cls(
+            y=y,
+            stage=res.x,
+            iterations=res.iterations,
+            residual=res.residual,
+            status=res.status,
+            state=state,
+        )
 
     @property
     def success(self) -> bool:
@@ -98,3 +111,26 @@ class Method:
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+def check_implicit_options(
+    solver: object, initial_guess: object, extrapolation_order: object = 0
+) -> None:
+    """Check the options the implicit methods share.
+
+    Raises
+    ------
+    ParameterError
+        ``solver`` is not a :class:`~isoflow.nonlinear.NonlinearSolver` instance,
+        ``initial_guess`` is not ``"extrapolate"`` or ``"state"``, or
+        ``extrapolation_order`` is not an integer in ``[0, 5]``.
+    """
+    if not isinstance(solver, NonlinearSolver):
+        raise ParameterError(f"solver must be FixedPoint() or Newton(), got {solver!r}")
+    if initial_guess not in ("extrapolate", "state"):
+        raise ParameterError(
+            f"initial_guess must be 'extrapolate' or 'state', got {initial_guess!r}"
+        )
+    p = extrapolation_order
+    if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or not 0 <= p <= 5:
+        raise ParameterError(f"extrapolation_order must be an integer in [0, 5], got {p!r}")

@@ -63,10 +63,4 @@ class ClassicalMidpoint(Method):
     ) -> StepResult:
         res = self.solver.solve(self.stage_problem(problem, y, h), y)
         y_next = problem.algebra.project(y + h * res.aux)
-        return StepResult(
-            y=y_next,
-            stage=res.x,
-            iterations=res.iterations,
-            residual=res.residual,
-            status=res.status,
-        )
+        return StepResult.from_solve(y_next, res)

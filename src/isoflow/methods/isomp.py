@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
-from ._base import Method, StepResult
+from ._base import Method, StepResult, check_implicit_options
 
 __all__ = ["IsoMP", "extrapolation_weights"]
 
@@ -89,15 +89,7 @@ class IsoMP(Method):
     name: ClassVar[str] = "IsoMP"
 
     def __post_init__(self) -> None:
-        if self.initial_guess not in ("extrapolate", "state"):
-            raise ValueError(
-                f"initial_guess must be 'extrapolate' or 'state', got {self.initial_guess!r}"
-            )
-        if not isinstance(self.solver, NonlinearSolver):
-            raise TypeError(f"solver must be FixedPoint() or Newton(), got {self.solver!r}")
-        p = self.extrapolation_order
-        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or not 0 <= p <= 5:
-            raise ValueError(f"extrapolation_order must be an integer in [0, 5], got {p!r}")
+        check_implicit_options(self.solver, self.initial_guess, self.extrapolation_order)
 
     def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:
         """The fixed-point problem ``X = G(X)`` of one step from ``W``."""
@@ -167,14 +159,7 @@ class IsoMP(Method):
         new_state = None
         if self.initial_guess == "extrapolate":
             new_state = (h, res.x - y, *offsets[: self.extrapolation_order])
-        return StepResult(
-            y=y_next,
-            stage=res.x,
-            iterations=res.iterations,
-            residual=res.residual,
-            status=res.status,
-            state=new_state,
-        )
+        return StepResult.from_solve(y_next, res, new_state)
 
 
 def extrapolation_weights(m: int) -> tuple[float, ...]:

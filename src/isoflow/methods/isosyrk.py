@@ -80,7 +80,7 @@ from .._errors import ParameterError
 from ..algebras.stacked import Stacked
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
-from ._base import Method, StepResult
+from ._base import Method, StepResult, check_implicit_options
 from .isomp import extrapolation_weights
 
 __all__ = ["IsoSyRK", "gauss_legendre"]
@@ -181,15 +181,7 @@ class IsoSyRK(Method):
         s = self.stages
         if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s not in (1, 2, 3):
             raise ParameterError(f"IsoSyRK: stages must be 1, 2 or 3, got {s!r}")
-        if not isinstance(self.solver, NonlinearSolver):
-            raise ParameterError(f"solver must be FixedPoint() or Newton(), got {self.solver!r}")
-        if self.initial_guess not in ("extrapolate", "state"):
-            raise ParameterError(
-                f"initial_guess must be 'extrapolate' or 'state', got {self.initial_guess!r}"
-            )
-        p = self.extrapolation_order
-        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or not 0 <= p <= 5:
-            raise ParameterError(f"extrapolation_order must be an integer in [0, 5], got {p!r}")
+        check_implicit_options(self.solver, self.initial_guess, self.extrapolation_order)
 
     @property  # type: ignore[misc]
     def order(self) -> int:  # type: ignore[override]
@@ -263,14 +255,7 @@ class IsoSyRK(Method):
             if state is not None and len(state) >= 2 and state[0] == h:
                 old = tuple(state[1 : self.extrapolation_order + 1])
             new_state = (h, D, *old)
-        return StepResult(
-            y=y_next,
-            stage=res.x,
-            iterations=res.iterations,
-            residual=res.residual,
-            status=res.status,
-            state=new_state,
-        )
+        return StepResult.from_solve(y_next, res, new_state)
 
 
 def _stages_from_B(alg: Any, hA: Array, B: Array, W: Array) -> Array:

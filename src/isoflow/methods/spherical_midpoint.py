@@ -49,7 +49,7 @@ from .._errors import UnsupportedAlgebraError
 from ..algebras.spin import SpinVectors, dot
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
-from ._base import Method, StepResult
+from ._base import Method, StepResult, check_implicit_options
 
 __all__ = ["SphericalMidpoint"]
 
@@ -128,12 +128,7 @@ class SphericalMidpoint(Method):
     name: ClassVar[str] = "spherical midpoint"
 
     def __post_init__(self) -> None:
-        if self.initial_guess not in ("extrapolate", "state"):
-            raise ValueError(
-                f"initial_guess must be 'extrapolate' or 'state', got {self.initial_guess!r}"
-            )
-        if not isinstance(self.solver, NonlinearSolver):
-            raise TypeError(f"solver must be FixedPoint() or Newton(), got {self.solver!r}")
+        check_implicit_options(self.solver, self.initial_guess)
 
     @staticmethod
     def _check(problem: IsospectralProblem) -> SpinVectors:
@@ -182,11 +177,4 @@ class SphericalMidpoint(Method):
         res = self.solver.solve(self.stage_problem(problem, y, h), M0)
         y_next = alg.project(y + h * res.aux)
         new_state = (h, res.x - y) if self.initial_guess == "extrapolate" else None
-        return StepResult(
-            y=y_next,
-            stage=res.x,
-            iterations=res.iterations,
-            residual=res.residual,
-            status=res.status,
-            state=new_state,
-        )
+        return StepResult.from_solve(y_next, res, new_state)

@@ -99,7 +99,7 @@ def brockett(
         :data:`BROCKETT_DEFAULT_SCALE` ``= 0.75``). ``W_0 = scale * G / ||G||_2`` with ``G`` a
         Gaussian (GUE) Hermitian matrix, ``herm(n).random(seed)``. The paper draws the entries
         uniformly from (0, 1), which gives :math:`\|W_0\| \approx n/2 = 5` for ``n = 10``; with
-        the default ``N`` the implicit step then does not converge at ``h = 0.1`` (NOTES.md).
+        the default ``N`` the implicit step then does not converge at ``h = 0.1``.
         The default was measured for ``n = 10``, ``h = 0.1``, ``T = 1000`` over seeds 0-11:
         with ``scale = 0.75`` (:math:`h\|B(W_0)\|_2 \le 0.1 \cdot 2 \|N - \bar\nu I\|_2
         \|W_0\|_2 = 0.675`) fixed-point iteration needs at most about 50 iterations in a step

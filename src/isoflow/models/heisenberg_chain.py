@@ -71,7 +71,7 @@ def heisenberg_chain(
 
     .. math:: B_i(w) = -\nabla_i H = -(w_{i-1} + w_{i+1})
 
-    (the sign NOTES.md corrects). IsoMP then solves
+    (the sign corrected in ``docs/theory/method.rst``). IsoMP then solves
     :math:`w_k = x + \tfrac h2\, x \times B + \tfrac{h^2}{4} (B\cdot x) B` and
     :math:`w_{k+1} = x - \tfrac h2\, x \times B + \tfrac{h^2}{4}(B\cdot x) B`, ``B = B(x)``;
     :class:`~isoflow.SphericalMidpoint` is :math:`w_{k+1} = w_k + h\, m \times \nabla H(m)`.

@@ -45,7 +45,7 @@ def paper_vortex_config(config: int) -> tuple[Array, Array]:
     r"""Positions ``(3, 3)`` and circulations ``(3,)`` of the paper's configuration 1 or 2.
 
     The paper prints 4-digit roundings; these are the exact points on
-    :math:`x^2 + y^2 - z^2 = -1` they round (NOTES.md):
+    :math:`x^2 + y^2 - z^2 = -1` they round:
 
     * 1 (equilateral relative equilibrium): :math:`(-\tfrac12, \tfrac{\sqrt3}{2}, \sqrt2)`,
       :math:`(-\tfrac12, -\tfrac{\sqrt3}{2}, \sqrt2)`, :math:`(1, 0, \sqrt2)`,
@@ -144,7 +144,8 @@ def hyperbolic_vortices(
     :math:`1/\Gamma_i` in the Euclidean pairing of :class:`~isoflow.algebras.SL2Vectors`,
     i.e. ``from_hamiltonian`` with the gradient :math:`-\nabla_i H/\Gamma_i` (equivalently
     :math:`-2` times the Frobenius Lie–Poisson flow of ``H`` on :math:`2\times2` matrices with
-    weights :math:`1/\Gamma_i`, NOTES.md). ``B`` is a gradient, so IsoMP on this problem (the
+    weights :math:`1/\Gamma_i`; corrected from the paper). ``B`` is a gradient, so IsoMP on this
+    problem (the
     *hyperbolic midpoint*) is a Poisson map for the weighted product structure
     :math:`P(w) = \operatorname{diag}(-\tfrac{2}{\Gamma_i} L \hat w_i L)`. ``H`` and ``M`` are
     conserved (``H`` because :math:`\nabla_i H \cdot \dot w_i = 0` term by term, ``M`` by

@@ -40,7 +40,7 @@ def paper_inertia_d(n: int) -> Array:
     r"""The paper's inertia weights generalized to any ``n``: :math:`d_i = 1/\min(i, n+1-i)`.
 
     For ``n = 10`` this is ``(1, 1/2, 1/3, 1/4, 1/5, 1/5, 1/4, 1/3, 1/2, 1)`` (paper, Section
-    3.1, with the symmetrization of NOTES.md: :math:`c_{ij} = (d_i + d_j)/2`).
+    3.1, with the symmetrization of the corrections to the paper: :math:`c_{ij} = (d_i + d_j)/2`).
     """
     n = check_n(n, 1, "paper_inertia_d")
     i = np.arange(1, n + 1)
@@ -69,7 +69,7 @@ def rigid_body(
 ) -> tuple[IsospectralProblem, Array]:
     r"""The generalized rigid body on :math:`\mathfrak{so}(n)` and its initial state.
 
-    Equations (paper, eqs. (15)–(16), with the inertia operator corrected as in NOTES.md):
+    Equations (paper, eqs. (15)–(16), inertia operator corrected):
 
     .. math::
 
@@ -92,7 +92,7 @@ def rigid_body(
       (:func:`paper_inertia_d`); for ``n = 10``,
       ``d = (1, 1/2, 1/3, 1/4, 1/5, 1/5, 1/4, 1/3, 1/2, 1)``. The paper prints the row scaling
       :math:`W_{ij}/d_i^{-1}`, which does not map :math:`\mathfrak{so}(n)` to itself; the
-      symmetrized operator used here is the one whose energy is the printed ``H`` (NOTES.md).
+      symmetrized operator used here is the one whose energy is the printed ``H``.
     * ``d``: the same symmetrized operator for any positive weights ``d`` of shape ``(n,)``.
     * ``inertia`` of shape ``(n, n)``: the *plane moments* :math:`I_{ij} = I_{ji} > 0`
       (:math:`i \ne j`; the diagonal is ignored), :math:`\Omega_{ij} = W_{ij}/I_{ij}`, i.e.
@@ -145,7 +145,7 @@ def rigid_body(
     References
     ----------
     M. Viviani, *A minimal-variable symplectic method for isospectral flows*, Section 3.1
-    (and /work/shared/paper/NOTES.md for the corrected inertia operator).
+    (the corrected inertia operator: *Corrections to the paper*, ``docs/theory/method.rst``).
     S. V. Manakov, Note on the integration of Euler's equations of the dynamics of an
     n-dimensional rigid body, Funct. Anal. Appl. 10 (1976) 328–329.
     T. Ratiu, The motion of the free n-dimensional rigid body, Indiana Univ. Math. J. 29 (1980).
