@@ -19,7 +19,8 @@ from helpers import (
 )
 from isoflow._solve import RUN_FAILED
 from isoflow._stepping import PythonRunner
-from isoflow.io import _pack_state, _unpack_state
+from isoflow.io.codec import pack_state as _pack_state
+from isoflow.io.codec import unpack_state as _unpack_state
 from isoflow.methods.composition import SCHEMES, composition_order, full_coefficients
 from isoflow.registry import build
 from test_lie_poisson import _defect

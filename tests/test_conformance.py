@@ -20,7 +20,8 @@ import pytest
 import isoflow as iso
 from helpers import SPACES, loglog_slope, run_with, space_problem, space_state
 from isoflow._stepping import PythonRunner
-from isoflow.io import _pack_state, _unpack_state
+from isoflow.io.codec import pack_state as _pack_state
+from isoflow.io.codec import unpack_state as _unpack_state
 
 
 @dataclass(frozen=True)

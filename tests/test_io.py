@@ -14,7 +14,8 @@ import pytest
 import isoflow as iso
 from isoflow import io
 from isoflow.diagnostics import DiagnosticsAccumulator, compute_diagnostics
-from isoflow.io import _pack_state, _unpack_state
+from isoflow.io.codec import pack_state as _pack_state
+from isoflow.io.codec import unpack_state as _unpack_state
 
 CFG = {"model": "rigid-body", "params": {"n": 5}, "dt": 0.1, "n_steps": 700, "save_every": 3}
 
@@ -214,3 +215,52 @@ def test_streaming_memory_does_not_grow_with_the_number_of_steps(tmp_path: Path)
     gc.collect()
     large = _streamed_peak(10_000, tmp_path / "b.h5")
     assert large - small < 200 * 1024, (small, large)
+
+
+def _to_version_1(path: Path) -> None:
+    """Rewrite a closed version 2 file in place as the version 1 format wrote it."""
+    with h5py.File(path, "r+") as f:
+        cur = int(f["checkpoint"]["current"][0])
+        run_info = np.asarray(f["checkpoint"][f"slot{cur}"]["run_info"][:], dtype=np.uint8)
+        for i in (0, 1):
+            g = f["checkpoint"][f"slot{i}"]
+            index = np.asarray(g["index"][:2])
+            del g["index"], g["run_info"]
+            g.create_dataset("index", data=index)
+        del f["checksums"]
+        del f.attrs["header_crc"]
+        f.attrs["isoflow_format_version"] = 1
+        f.create_dataset("run_info", data=run_info, maxshape=(None,), chunks=(1024,))
+
+
+def test_version_1_files_read_and_resume_to_version_2(tmp_path: Path, monkeypatch) -> None:
+    from isoflow._compiled.runner import CompiledRunner
+
+    cfg, problem, y0, method, kw = _build()
+    ref = iso.solve(problem, method, y0, **kw, progress=False)
+    path = tmp_path / "v1.h5"
+    calls = {"n": 0}
+    original = CompiledRunner.advance
+
+    def flaky(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise _Interrupt
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(CompiledRunner, "advance", flaky)
+    with pytest.raises(_Interrupt):
+        iso.solve(
+            problem, method, y0, **kw, progress=False, writer=io.HDF5Writer(path, cfg, chunk_rows=8)
+        )
+    monkeypatch.setattr(CompiledRunner, "advance", original)
+    _to_version_1(path)
+    part = io.info(path)
+    assert part["format_version"] == 1 and part["state"] == "stopped" and part["resumable"]
+    run = io.load(path)
+    assert np.array_equal(run.ys, ref.ys[: len(run.ys)]) and run.run_info["status"] == 2
+    sol = io.resume(path, progress=False)
+    assert sol.success and np.array_equal(sol.ys[-1], ref.ys[-1])
+    done = io.info(path, verify_states=True)
+    assert done["format_version"] == 2 and done["verified"] and done["state"] == "complete"
+    assert io.load(path).ys.tobytes() == ref.ys.tobytes()

@@ -20,11 +20,7 @@ HEAVY = (
 )  # fmt: skip
 
 #: Known import edges that close a cycle, each with the reason it is still there.
-ALLOWED_CYCLE_EDGES = {
-    # io.py reads ``__version__`` from the package root; the io/ package of the io-reliability
-    # branch is to import it from isoflow._version (then delete this entry).
-    ("isoflow.io", "isoflow"),
-}
+ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 
 
 def _loaded_after(code: str) -> list[str]:

@@ -3,16 +3,13 @@ a second kill) gives the uninterrupted run's states bit for bit."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import signal
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
+from cli_helpers import isoflow_cmd as _cmd
+from cli_helpers import kill_when as _kill_when
 from isoflow import io
 
 ARGS = [
@@ -23,7 +20,7 @@ ARGS = [
     "--dt",
     "0.01",
     "--n-steps",
-    "12000",
+    "48000",  # long enough (about 5 s) to be killed while it runs
     "--save-every",
     "3",
     "--chunk-rows",
@@ -34,36 +31,12 @@ ARGS = [
 ]
 
 
-def _cmd(*args: str) -> list[str]:
-    exe = shutil.which("isoflow")
-    return [exe, *args] if exe else [sys.executable, "-m", "isoflow.cli", *args]
-
-
-def _kill_when(path: Path, min_rows: int, proc: subprocess.Popen) -> int:
-    """SIGKILL ``proc`` once ``path`` holds at least ``min_rows`` states; return them."""
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise AssertionError("the run finished before it could be killed; make it longer")
-        try:
-            n = io.info(path)["n_saved"] if path.exists() else 0
-        except io.ResultFileError:
-            n = 0  # the file is being created
-        if n >= min_rows:
-            break
-        time.sleep(0.02)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert proc.returncode == -signal.SIGKILL
-    return n
-
-
 def test_sigkill_then_resume_is_bit_for_bit(tmp_path: Path) -> None:
     full = tmp_path / "full.h5"
     out = subprocess.run(_cmd(*ARGS, "--out", str(full)), capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     ref = io.load(full)
-    assert ref.complete and len(ref.ys) == 4001
+    assert ref.complete and len(ref.ys) == 16001
 
     path = tmp_path / "killed.h5"
     proc = subprocess.Popen(_cmd(*ARGS, "--out", str(path)), stderr=subprocess.DEVNULL)
@@ -74,9 +47,8 @@ def test_sigkill_then_resume_is_bit_for_bit(tmp_path: Path) -> None:
     assert not part.complete and part.run_info is None
     assert len(part.ys) >= seen and part.step == 3 * (len(part.ys) - 1)
     assert np.array_equal(part.ys, ref.ys[: len(part.ys)])
-    assert (
-        "killed?" in subprocess.run(_cmd("info", str(path)), capture_output=True, text=True).stdout
-    )
+    shown = subprocess.run(_cmd("info", str(path)), capture_output=True, text=True).stdout
+    assert "killed?" in shown and "resumable                yes" in shown
 
     # resume, kill the resumed run again, resume again
     proc = subprocess.Popen(

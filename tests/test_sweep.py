@@ -423,7 +423,8 @@ def test_client_killed_and_restarted_finishes_like_an_uninterrupted_run(
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait(30)
-    workers = {int(p.read_text()) for p in (d / "tasks").glob("*.lock") if p.read_text().strip()}
+    locks = [task_paths(d, t.id).lock for t in spec.tasks]  # not the result files' own locks
+    workers = {int(p.read_text()) for p in locks if p.exists() and p.read_text().strip()}
     end = time.monotonic() + 15
     while any(_alive(p) for p in workers) and time.monotonic() < end:
         time.sleep(0.05)

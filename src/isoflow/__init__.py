@@ -29,6 +29,7 @@ from ._errors import IsoflowError as IsoflowError
 from ._errors import NonFiniteError as NonFiniteError
 from ._errors import NotInSpaceError as NotInSpaceError
 from ._errors import ParameterError as ParameterError
+from ._errors import ResultFileError as ResultFileError
 from ._errors import ResultWriteError as ResultWriteError
 from ._errors import ShapeError as ShapeError
 from ._errors import StepSizeError as StepSizeError
@@ -117,6 +118,7 @@ __all__ = [
     "NotInSpaceError",
     "PairwiseVortex",
     "ParameterError",
+    "ResultFileError",
     "ResultWriteError",
     "ShapeError",
     "Solution",

@@ -15,6 +15,7 @@ __all__ = [
     "NonFiniteError",
     "NotInSpaceError",
     "ParameterError",
+    "ResultFileError",
     "ResultWriteError",
     "ShapeError",
     "StepSizeError",
@@ -69,6 +70,14 @@ class InvalidBError(IsoflowError, ValueError):
 
     Raised when ``B(W)`` has the wrong shape or dtype, holds non-finite numbers, or lies outside
     the normalizer algebra ``N(V)`` that the isospectral flow ``W' = [B(W), W]`` requires.
+    """
+
+
+class ResultFileError(IsoflowError, OSError):
+    """A path is not a usable isoflow result file.
+
+    Missing, not HDF5, not ours, truncated, damaged (a checksum does not match), crafted (a
+    field out of range), locked by a live writer, or not a regular file where one is replaced.
     """
 
 

@@ -482,6 +482,42 @@ def solve(
     )  # fmt: skip
 
 
+def check_restart(
+    problem: IsospectralProblem,
+    method: Method,
+    state: RunState,
+    *,
+    t0: float,
+    dt: float,
+    n_steps: int,
+    save_every: int,
+    writer: StreamWriter | None = None,
+) -> tuple[float, int, RunState]:
+    """Validate a restart from ``state`` as :func:`solve` validates a start.
+
+    Returns ``(dt, n_steps, state)`` with the state checked and projected onto the space.
+
+    Raises
+    ------
+    IsoflowError
+        The state (outside the space: :class:`NotInSpaceError`; not finite; another shape),
+        the failure record or the time grid do not describe a valid run.
+    """
+    _check_objects(problem, method, writer)
+    dt_, n = time_grid(t0, None, dt, n_steps)
+    if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
+        raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
+    if not 0 <= state.step <= n:
+        raise ParameterError(f"checkpoint step {state.step} outside the run's 0..{n} steps")
+    W = _check_state(problem, state.y, "checkpoint state")
+    M = int(np.prod(problem.algebra.batch_shape(W), dtype=np.int64))
+    if state.failures is not None and state.failures.step.shape != (M,):
+        raise ShapeError(
+            f"checkpoint failure record for {state.failures.step.shape} members, state has {M}"
+        )
+    return dt_, n, dataclasses.replace(state, y=W)
+
+
 def continue_run(
     problem: IsospectralProblem,
     method: Method,
@@ -498,28 +534,19 @@ def continue_run(
 ) -> Solution:
     """Continue a run from ``state`` (a checkpoint), appending to ``writer``.
 
-    The restart goes through the same validation as :func:`solve`: the time grid, the
-    checkpoint's state (in the space, finite, the run's shape) and ``B`` at it. ``accumulator``
-    has absorbed the diagnostics of the rows already written.
+    The restart goes through the same validation as :func:`solve` (:func:`check_restart`):
+    the time grid, the checkpoint's state (in the space, finite, the run's shape) and ``B`` at
+    it. ``accumulator`` has absorbed the diagnostics of the rows already written.
 
     Raises
     ------
     IsoflowError
         The state or the time grid do not describe a valid run.
     """
-    _check_objects(problem, method, writer)
-    dt_, n = time_grid(t0, None, dt, n_steps)
-    if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
-        raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
-    if not 0 <= state.step <= n:
-        raise ParameterError(f"checkpoint step {state.step} outside the run's 0..{n} steps")
-    W = _check_state(problem, state.y, "checkpoint state")
-    M = int(np.prod(problem.algebra.batch_shape(W), dtype=np.int64))
-    if state.failures is not None and state.failures.step.shape != (M,):
-        raise ShapeError(
-            f"checkpoint failure record for {state.failures.step.shape} members, state has {M}"
-        )
-    st = dataclasses.replace(state, y=W)
+    dt_, n, st = check_restart(
+        problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
+        writer=writer,
+    )  # fmt: skip
     return _run(
         problem, method, st, t0=float(t0), dt=dt_, n=n, save_every=int(save_every),
         diagnostics=True, progress=progress, throw=throw, writer=writer, fresh=False,
@@ -711,12 +738,16 @@ class _Sink:
         series = self.accumulator.update(ts, ys) if self.series else {}
         try:
             self.writer.append(ts, ys, series)
+        except IsoflowError:
+            raise  # already says what failed (a lock, a failed write): not wrapped again
         except OSError as exc:
             raise ResultWriteError(f"writing the saved states failed: {exc}") from exc
 
     def _checkpoint(self, k: int, y: Array, st: Any, fails: MemberFailures | None) -> None:
         try:
             self.writer.checkpoint(k, y, st, fails)
+        except IsoflowError:
+            raise
         except OSError as exc:
             raise ResultWriteError(f"writing a checkpoint failed: {exc}") from exc
 
@@ -819,11 +850,10 @@ def _run(
                     "casimir_scale": np.asarray(alg.casimir_scale(W), dtype=float).tolist(),
                 }
             )
+        except IsoflowError:
+            raise  # e.g. another process writes the file: its own message
         except OSError as exc:
             raise ResultWriteError(f"creating the result file failed: {exc}") from exc
-        emit(np.array([t0]), W[None].copy())
-        if not memory:
-            checkpoint()
     bar = tqdm(
         total=n, initial=k0, disable=(None if progress is None else not progress),
         delay=1.0, desc=method.name, unit="step", leave=False,
@@ -841,6 +871,10 @@ def _run(
     reported = runner.failures.failed.size
     failure_exc: Exception | None = None
     try:
+        if fresh:  # inside the try: a failure here closes the writer (no temporary files left)
+            emit(np.array([t0]), W[None].copy())
+            if not memory:
+                checkpoint()
         while runner.k < n and runner.failures.alive.any():
             with _deferred_sigint():
                 k_before = runner.k
@@ -929,6 +963,9 @@ def _run(
                     "stats": stats.as_dict(),
                 }
             )
+        except IsoflowError:
+            if status != RUN_INTERRUPTED:
+                raise
         except OSError as exc:
             if status != RUN_INTERRUPTED:
                 raise ResultWriteError(f"closing the result file failed: {exc}") from exc

@@ -214,6 +214,9 @@ def _build_parser() -> argparse.ArgumentParser:
     info = sub.add_parser("info", help="describe a result file: parameters and invariant drifts")
     info.add_argument("file", help="an isoflow result file (HDF5) or a sweep directory")
     info.add_argument("--json", action="store_true", help="print JSON")
+    info.add_argument(
+        "--verify", action="store_true", help="also check every saved state's checksum"
+    )
     info.set_defaults(func=_info, computes=False)
 
     _add_sweep_parser(sub)
@@ -472,13 +475,10 @@ def _run(args: argparse.Namespace) -> int:
     spec, cfg, out = _run_config(args)
     if not out:
         raise UserError("give the result file with --out FILE (or out = ... in the TOML)")
-    target = Path(out)
-    if target.exists() and not target.is_file():
-        raise UserError(f"{out} exists and is not a regular file; not replacing it")
-    if target.exists() and not args.force:
-        raise UserError(f"{out} exists (use --force to overwrite, or --resume {out} to continue)")
+    writer = io.HDF5Writer(
+        out, cfg, chunk_rows=args.chunk_rows, flush_seconds=args.flush_seconds, force=args.force
+    )  # refuses an existing file without --force, and anything that is not a regular file
     problem, y0, method, kwargs = registry.build(cfg, model=spec)
-    writer = io.HDF5Writer(out, cfg, chunk_rows=args.chunk_rows, flush_seconds=args.flush_seconds)
     _announce_compiles()
     sol = solve(problem, method, y0, **kwargs, progress=_progress(args), throw=False, writer=writer)
     params = ", ".join(f"{k} = {v}" for k, v in cfg["params"].items())
@@ -496,17 +496,12 @@ def _info(args: argparse.Namespace) -> int:
     if Path(args.file).is_dir():
         return _info_sweep(args)
 
-    data = io.info(args.file)
+    data = io.info(args.file, verify_states=args.verify)
     if args.json:
         print(json.dumps(data, indent=2))
         return 0
     cfg, meta, run_info = data["config"], data["meta"], data["run_info"]
-    if data["complete"]:
-        state = "complete"
-    elif run_info is None:
-        state = "incomplete: stopped without closing (killed?); resume with isoflow run --resume"
-    else:
-        state = f"incomplete: {run_info.get('message', '')}"
+    state = f"{data['state']}: {data['state_message']}".rstrip(": ")
     model = str(cfg.get("model", "(not registered)"))
     if "model" in cfg and model not in registry.MODELS:
         model += f" (not built in: resume with --model {model})"
@@ -518,7 +513,12 @@ def _info(args: argparse.Namespace) -> int:
         f"  {'algebra':<24} {meta.get('algebra')}, state shape {tuple(meta.get('state_shape'))}",
         f"  {'time grid':<24} t0 = {meta.get('t0'):g}, dt = {meta.get('dt'):g}, "
         f"{meta.get('n_steps')} steps, save every {meta.get('save_every')}",
-        f"  {'steps done':<24} {data['step']} ({state})",
+        f"  {'state':<24} {state}",
+        f"  {'resumable':<24} {'yes' if data['resumable'] else 'no'}"
+        + (f" (writer: {data['writer']})" if data["writer"] else ""),
+        f"  {'format version':<24} {data['format_version']}"
+        + (", every saved state verified" if data["verified"] else ""),
+        f"  {'steps done':<24} {data['step']}",
         f"  {'saved states':<24} {data['n_saved']} (last t = {data['t_last']})",
     ]
     if run_info is not None:

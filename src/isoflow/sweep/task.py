@@ -278,6 +278,7 @@ def run_task(
                     spec.config(task.members[0]),
                     chunk_rows=spec.chunk_rows,
                     flush_seconds=spec.flush_seconds,
+                    force=True,  # starting again replaces a file that did not resume
                 )
                 sol = solve(
                     problem, method, Y, progress=False, throw=False, writer=writer, **kwargs

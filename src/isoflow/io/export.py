@@ -1,0 +1,89 @@
+"""Export of result files to xarray / netCDF, and full diagnostics of a loaded run.
+
+The drift arithmetic lives in :mod:`isoflow.diagnostics` only (:class:`DiagnosticsAccumulator`);
+this module feeds it the stored series.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._errors import IsoflowError
+from ..diagnostics import Diagnostics, DiagnosticsAccumulator
+from ..problems import IsospectralProblem
+from .reader import RunData, load
+
+__all__ = ["solution_diagnostics", "to_netcdf", "to_xarray"]
+
+Array = NDArray[Any]
+
+
+def to_xarray(path: str | os.PathLike[str]) -> Any:
+    """The valid saved states and diagnostics of a result file as an :class:`xarray.Dataset`.
+
+    Variables: ``y`` (or ``y_real``/``y_imag`` for complex states, so that netCDF can hold
+    them) with dimensions ``("time", "dim_0", ...)`` and the diagnostic series; attributes
+    ``config`` and ``meta`` as JSON strings.
+    """
+    try:
+        import xarray as xr
+    except ImportError as exc:  # pragma: no cover - optional dependency
+        raise IsoflowError("to_xarray needs xarray: pip install 'isoflow[xarray]'") from exc
+    run = load(path)
+    data_vars: dict[str, Any] = {}
+
+    def add(name: str, arr: Array) -> None:
+        dims = ("time", *(f"{name}_dim{i}" for i in range(arr.ndim - 1)))
+        if np.iscomplexobj(arr):
+            data_vars[f"{name}_real"] = (dims, arr.real)
+            data_vars[f"{name}_imag"] = (dims, arr.imag)
+        else:
+            data_vars[name] = (dims, arr)
+
+    add("y", run.ys)
+    for name, arr in run.series.items():
+        add(name.replace("/", "_"), arr)
+    return xr.Dataset(
+        data_vars,
+        coords={"time": run.ts},
+        attrs={
+            "config": json.dumps(run.config),
+            "meta": json.dumps(run.meta),
+            "isoflow_step": run.step,
+        },
+    )
+
+
+def to_netcdf(path: str | os.PathLike[str], out: str | os.PathLike[str]) -> Path:
+    """Export a result file to netCDF-4 (engine ``h5netcdf``); returns the output path."""
+    ds = to_xarray(path)
+    ds.to_netcdf(out, engine="h5netcdf")
+    return Path(out)
+
+
+def solution_diagnostics(run: RunData, problem: IsospectralProblem) -> Diagnostics:
+    """Full :class:`Diagnostics` (time series and drifts) of a loaded run for ``problem``."""
+    acc = DiagnosticsAccumulator(problem)
+    acc.set_first_state(run.ys[0])
+    acc.absorb(run.ts, run.series)
+    d = acc.result()
+    return Diagnostics(
+        ts=run.ts,
+        casimirs=run.series["casimirs"],
+        casimir_drift=d.casimir_drift,
+        distance=run.series["distance"],
+        max_distance=d.max_distance,
+        hamiltonian=run.series.get("hamiltonian"),
+        hamiltonian_drift=d.hamiltonian_drift,
+        hamiltonian_relative_drift=d.hamiltonian_relative_drift,
+        lyapunov=run.series.get("lyapunov"),
+        lyapunov_max_decrease=d.lyapunov_max_decrease,
+        invariants={k: run.series[f"invariants/{k}"] for k in d.invariants},
+        invariant_drift=d.invariant_drift,
+    )

@@ -1,0 +1,159 @@
+"""Continuing a streamed run from its last checkpoint: :func:`resume`.
+
+The order is: take the file's write lock (a live writer gets a clear error); open and validate
+the file; check sizes before building anything; build the problem and method from the stored
+configuration (:func:`isoflow.registry.build`) or take them as arguments; check them against
+the file (model, time grid, shape, method); validate the restart as :func:`isoflow.solve`
+validates a start; verify every row's checksum; and only then touch the file (rewrite a killed
+or version 1 file, truncate it to the checkpoint) and continue through the time loop's own entry
+(:func:`isoflow._solve.continue_run`). A refusal at any step leaves the file unchanged.
+
+The per-step arithmetic, the method state (e.g. IsoMP's warm start) and the step ranges between
+saves are those of the uninterrupted run, so the final state equals an uninterrupted run's bit
+for bit.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import ResultFileError
+from .._solve import RunState, Solution, check_restart, continue_run
+from ..diagnostics import DiagnosticsAccumulator
+from ..methods import Method
+from ..problems import IsospectralProblem
+from .lock import WriteLock
+from .reader import Checkpoint, iter_rows, open_result, read_checkpoint
+from .recovery import recover
+from .writer import HDF5Writer
+
+__all__ = ["resume"]
+
+
+def _rebuild(
+    p: Path,
+    config: dict[str, Any],
+    meta: dict[str, Any],
+    cp: Checkpoint,
+    problem: IsospectralProblem | None,
+    method: Method | None,
+) -> tuple[IsospectralProblem, Method]:
+    """The problem and method of the run, checked against what the file recorded."""
+    from .. import registry
+
+    if problem is None or method is None:
+        if not config.get("model"):
+            raise ResultFileError(
+                f"{p}: the file's configuration names no registered model; pass problem= and "
+                "method= to resume it"
+            )
+        # validated first: a configuration asking for a huge state is refused here, before
+        # anything is allocated (registry errors, ConfigError, say what is wrong themselves)
+        cfg = registry.normalize_config(config)
+        prob_b, y0_b, meth_b, _kw = registry.build(cfg)
+        registry.check_recorded_state(meta, prob_b, y0_b)
+        problem = problem if problem is not None else prob_b
+        method = method if method is not None else meth_b
+    if not isinstance(method, Method):
+        raise ResultFileError(f"{p}: method= must be a Method instance, got {method!r}")
+    if method.name != meta["method"]:
+        raise ResultFileError(f"{p}: the run used {meta['method']!r}, not {method.name!r}")
+    if not isinstance(problem, IsospectralProblem):
+        raise ResultFileError(f"{p}: problem= must be an IsospectralProblem, got {problem!r}")
+    if problem.algebra.name != meta["algebra"]:
+        raise ResultFileError(
+            f"{p}: the run was on {meta['algebra']}, the problem given is on {problem.algebra.name}"
+        )
+    return problem, method
+
+
+def resume(
+    path: str | os.PathLike[str],
+    *,
+    problem: IsospectralProblem | None = None,
+    method: Method | None = None,
+    progress: bool | None = None,
+    throw: bool = True,
+    chunk_rows: int = 256,
+    flush_seconds: float = 1.0,
+) -> Solution:
+    """Continue a streamed run from its last checkpoint, appending to the same file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A result file written by :class:`~isoflow.io.HDF5Writer` (complete, stopped or killed).
+    problem, method : optional
+        The run's problem and method; by default rebuilt from the file's configuration with
+        :func:`isoflow.registry.build` (needed for runs of your own problems).
+    progress, throw :
+        As in :func:`isoflow.solve`.
+    chunk_rows, flush_seconds :
+        As in :class:`~isoflow.io.HDF5Writer`.
+
+    Returns
+    -------
+    Solution
+        As :func:`isoflow.solve` with a writer: the checkpoint state and the final state, and the
+        drifts over all saved states of the file.
+
+    Raises
+    ------
+    ResultFileError
+        Another process writes the file; the file is damaged or crafted; or the problem or
+        method do not match the run it records (the file is left unchanged).
+    ConfigError
+        The stored configuration does not rebuild the recorded run (another model, a size out
+        of range, a model that is not built in); the file is left unchanged.
+    NotInSpaceError
+        The checkpoint state is not in the problem's space (as :func:`isoflow.solve`).
+    """
+    p = Path(path)
+    if p.is_symlink():
+        p = Path(os.path.realpath(p))
+    if not p.exists():
+        raise ResultFileError(f"{p}: no such file")
+    lock = WriteLock(p)
+    handed_over = False
+    try:
+        with open_result(p, check_live=False) as o:
+            cp = read_checkpoint(o)
+            if cp is None:
+                raise o.fail("no checkpoint to resume from (start the run again)")
+            config, meta = o.config, o.meta
+            needs_rewrite = o.version < 2 or o.flagged
+            problem, method = _rebuild(p, config, meta, cp, problem, method)
+            t0, dt = float(meta["t0"]), float(meta["dt"])
+            n_steps, save_every = int(meta["n_steps"]), int(meta["save_every"])
+            if tuple(np.shape(cp.y)) != tuple(meta["state_shape"]):
+                raise o.fail(f"checkpoint state shape {np.shape(cp.y)} is not the run's")
+            state = RunState(cp.step, cp.y, cp.method_state, cp.failures)
+            check_restart(
+                problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every
+            )
+            # every row verified, and the drifts of the rows written accumulated
+            acc = DiagnosticsAccumulator(problem)
+            names = list(o.rows)
+            for blocks, data in iter_rows(o, cp, names):
+                if blocks[0][0] == 0:
+                    acc.set_first_state(data["ys"][0])
+                acc.absorb(data["ts"], {k: data[k] for k in names[2:]})
+        if needs_rewrite:
+            cp = recover(p, chunk_rows)
+        writer = HDF5Writer.reopen(
+            p, lock, n_rows=cp.n_rows, n_blocks=cp.n_blocks, slot=cp.slot,
+            last=(cp.step, cp.y, cp.method_state, cp.failures),
+            chunk_rows=chunk_rows, flush_seconds=flush_seconds,
+        )  # fmt: skip
+        handed_over = True
+    finally:
+        if not handed_over:
+            lock.release()
+    return continue_run(
+        problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
+        writer=writer, accumulator=acc, progress=progress, throw=throw,
+    )  # fmt: skip
