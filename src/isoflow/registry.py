@@ -39,8 +39,10 @@ import importlib.metadata
 import keyword
 import math
 import re
+import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -74,6 +76,7 @@ __all__ = [
     "make_solver",
     "normalize_config",
     "parse_param",
+    "read_toml",
 ]
 
 #: Entry-point group under which installed packages register models by name.
@@ -797,6 +800,27 @@ def config_from_toml(table: Mapping[str, Any]) -> tuple[dict[str, Any], str | No
     if out is not None and not (isinstance(out, str) and out):
         raise ConfigError(f"out must be a file name (a string), got {out!r}")
     return cfg, out
+
+
+def read_toml(path: str | Path, what: str, error: type[Exception] = IsoflowError) -> dict:
+    """The table of the TOML file ``path``.
+
+    Raises
+    ------
+    error
+        One line naming ``path``: it does not exist, is not valid TOML, or cannot be read
+        (``what`` names the kind of file in the message).
+    """
+    p = Path(path)
+    try:
+        with p.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise error(f"{p}: no such {what}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{p}: malformed TOML: {' '.join(str(exc).split())}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{p}: cannot read the {what}: {exc}") from None
 
 
 def build(

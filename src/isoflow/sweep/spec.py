@@ -14,7 +14,6 @@ import itertools
 import json
 import math
 import os
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -200,15 +199,7 @@ def read_spec(source: str | os.PathLike[str] | Mapping[str, Any]) -> SweepSpec:
     else:
         p = Path(source)
         where = str(p)
-        try:
-            with p.open("rb") as fh:
-                table = tomllib.load(fh)
-        except FileNotFoundError:
-            raise SweepError(f"{p}: no such sweep file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise SweepError(f"{p}: malformed TOML: {' '.join(str(exc).split())}") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise SweepError(f"{p}: cannot read the sweep file: {exc}") from None
+        table = registry.read_toml(p, "sweep file", SweepError)
     try:
         return _build(table)
     except SweepError as exc:
