@@ -8,6 +8,7 @@ Target: ratio <= 1.15. Run alone: ``python benchmarks/bench_3_large_dense.py``.
 from __future__ import annotations
 
 import sys
+import time
 from typing import Any
 
 import numpy as np
@@ -34,9 +35,15 @@ def run(quick: bool) -> list[dict[str, Any]]:
                 steps = {256: 8, 512: 4}.get(n, 2)  # one advance call, amortized
                 fast = StepTimer(prob, iso.IsoMP(), W0, 0.1)
                 its: dict[str, int] = {}
+                per_it: list[float] = []  # each call by its own iteration count
 
-                def compiled(fast: StepTimer = fast, steps: int = steps, its: dict = its) -> None:
+                def compiled(
+                    fast: StepTimer = fast, steps: int = steps, its: dict = its,
+                    per_it: list = per_it,
+                ) -> None:  # fmt: skip
+                    t = time.perf_counter()
                     its["n"] = fast.advance(steps)
+                    per_it.append((time.perf_counter() - t) / max(its["n"], 1))
 
                 A = np.ascontiguousarray(alg.random(seed=2))
                 Bm = np.ascontiguousarray(alg.random(seed=3))
@@ -47,12 +54,13 @@ def run(quick: bool) -> list[dict[str, Any]]:
                     np.matmul(Bm, A, out=P)
                     np.matmul(P, Bm, out=T)
 
-                t_fast, t_two = paired_best_times(compiled, two, repeats=3)
-                ratio = t_fast / its["n"] / t_two
+                _, t_two = paired_best_times(compiled, two, repeats=3)
+                t_it = min(per_it)
+                ratio = t_it / t_two
                 out.append(
                     record(
                         3, f"dense {space}({n}): time per iteration / two products",
-                        ms_per_iteration=t_fast / its["n"] * 1e3, ms_two_products=t_two * 1e3,
+                        ms_per_iteration=t_it * 1e3, ms_two_products=t_two * 1e3,
                         iterations=its["n"], threads={"blas": cores, "numba": 1},
                         runner=fast.label, metric="ratio (iteration / two products)",
                         value=ratio, target="<= 1.15", met=ratio <= 1.15,
