@@ -161,7 +161,10 @@ iso.solve(prob, iso.IsoMP(), W[:20], dt=0.1, n_steps=3, progress=False)
 t = time.perf_counter()
 sol = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=n, save_every=se, diagnostics=diag,
                 progress=False)
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+# VmHWM: the peak of this process's own memory map (ru_maxrss keeps the parent's peak across
+# fork and exec, so a large parent would be counted)
+hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")]
+peak = int(hwm[0].split()[1]) * 1024 if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 print(time.perf_counter() - t, sol.ys.nbytes, peak)
 """
 
