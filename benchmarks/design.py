@@ -164,7 +164,8 @@ sol = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=n, save_every=se, diagnost
 # VmHWM: the peak of this process's own memory map (ru_maxrss keeps the parent's peak across
 # fork and exec, so a large parent would be counted)
 hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")]
-peak = int(hwm[0].split()[1]) * 1024 if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = int(hwm[0].split()[1]) * 1024 if hwm else rss
 print(time.perf_counter() - t, sol.ys.nbytes, peak)
 """
 
