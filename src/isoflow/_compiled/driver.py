@@ -116,6 +116,7 @@ def run_member(  # type: ignore[no-untyped-def]
     it_max = 0
     res_max = 0.0
     taken = nsteps
+    to_save = save_every - k0 % save_every  # steps until the next k with k % save_every == 0
     for step in range(nsteps):
         k = k0 + step + 1
         if P > 1:
@@ -157,7 +158,9 @@ def run_member(  # type: ignore[no-untyped-def]
             if r > res_max:
                 res_max = r
             if kmax > 0:
-                slot = (head[p] + 1) % K
+                slot = head[p] + 1
+                if slot == K:
+                    slot = 0
                 push(ring[p], slot, X, W)
                 head[p] = slot
                 nh[p] = min(nh[p] + 1, kmax)
@@ -179,9 +182,12 @@ def run_member(  # type: ignore[no-untyped-def]
                     copy(out[row], W)
                     row += 1
             break
-        if k % save_every == 0 or k == k_final:
+        to_save -= 1
+        if to_save == 0 or k == k_final:  # k % save_every == 0, without a division per step
             copy(out[row], W)
             row += 1
+        if to_save == 0:
+            to_save = save_every
     rec[REC_ITERATIONS] += it_tot
     rec[REC_ITERATIONS_MAX] = max(rec[REC_ITERATIONS_MAX], it_max)
     rec[REC_RESIDUAL_MAX] = max(rec[REC_RESIDUAL_MAX], res_max)

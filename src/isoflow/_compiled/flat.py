@@ -64,6 +64,13 @@ def copy(dst, src):  # type: ignore[no-untyped-def]
         dst[i] = src[i]
 
 
+@numba.njit(cache=True, inline="always")
+def _back(head, q, K):  # type: ignore[no-untyped-def]
+    """``(head - q) % K`` for ``0 <= q < K`` without a division (the ring's older slots)."""
+    j = head - q
+    return j + K if j < 0 else j
+
+
 @numba.njit(cache=True)
 def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
     r"""``X = W + sum_q coefs[nh-1, q] ring[(head - q) % K]`` (newest offset first), or
@@ -86,19 +93,19 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
             X[i] = W[i] + a0 * d0[i]
         return sumsq(W)
     a1 = coefs[nh - 1, 1]
-    d1 = ring[(head - 1) % K]
+    d1 = ring[_back(head, 1, K)]
     if nh == 2:
         for i in range(S):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i])
         return sumsq(W)
     a2 = coefs[nh - 1, 2]
-    d2 = ring[(head - 2) % K]
+    d2 = ring[_back(head, 2, K)]
     if nh == 3:
         for i in range(S):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i])
         return sumsq(W)
     a3 = coefs[nh - 1, 3]
-    d3 = ring[(head - 3) % K]
+    d3 = ring[_back(head, 3, K)]
     if nh == 4:
         for i in range(S):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i])
