@@ -21,6 +21,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DPI",
     "SUFFIXES",
+    "eigenvalue_figure",
     "floor",
     "new_figure",
     "plot_indexed_variations",
@@ -121,3 +122,16 @@ def plot_indexed_variations(ax: Axes, x: Any, y: Any, *, ylabel: str, symbol: st
     m = Y.shape[1] if Y.ndim > 1 else 1
     plot_variation(ax, x, Y, lw=0.8, ylabel=ylabel, legend_columns=max(1, m // 2),
                    labels=[rf"${symbol}_{{{j + 1}}}$" for j in range(m)])  # fmt: skip
+
+
+def eigenvalue_figure(ts: Any, variation: Any, of: str) -> tuple[Figure, Axes]:
+    """A two-panel figure (shared time axis) whose top panel shows the variation of each
+    eigenvalue ``lambda_j(t) - lambda_j(0)`` of the matrix named ``of`` (TeX); returns the
+    figure and the bottom axes, for the experiment's second quantity."""
+    fig = new_figure(figsize=(7.5, 6))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    plot_indexed_variations(ax1, ts, variation, symbol=r"\lambda",
+                            ylabel=r"$\lambda_j(t) - \lambda_j(0)$")  # fmt: skip
+    ax1.set_title(f"Casimirs: variation of the eigenvalues of ${of}$")
+    ax2.set_xlabel("t")
+    return fig, ax2

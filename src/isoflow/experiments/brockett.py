@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import models, registry
-from .._figures import floor, new_figure, plot_indexed_variations
+from .._figures import eigenvalue_figure, floor
 from .._solve import solve
 from ._base import Experiment, ExperimentResult, check, header
 
@@ -105,15 +105,10 @@ class Brockett(Experiment):
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)
         d, p = result.data, result.summary["parameters"]
-        fig = new_figure(figsize=(7.5, 6))
-        ax1, ax2 = fig.subplots(2, 1, sharex=True)
-        plot_indexed_variations(ax1, d["ts"], d["eigenvalue_variation"], symbol=r"\lambda",
-                                ylabel=r"$\lambda_j(t) - \lambda_j(0)$")  # fmt: skip
-        ax1.set_title("Casimirs: variation of the eigenvalues of $W$")
+        fig, ax2 = eigenvalue_figure(d["ts"], d["eigenvalue_variation"], "W")
         ax2.semilogy(d["ts"], floor(d["off_diagonal"]), color="C3", label="off-diagonal part")
         ax2.set_title("W tends to a diagonal matrix")
         ax2.set_ylabel(r"$\|W - \mathrm{diag}\,W\| / \|W\|$")
-        ax2.set_xlabel("t")
         ax2.legend(fontsize=7)
         fig.suptitle(
             f"Brockett flow on herm({p['n']}), N = diag(1..{p['n']}), IsoMP,\n"

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import models, registry
-from .._figures import new_figure, plot_indexed_variations, plot_variation
+from .._figures import eigenvalue_figure, plot_variation
 from .._solve import solve
 from ._base import Experiment, ExperimentResult, check, header
 
@@ -89,15 +89,10 @@ class RigidBody(Experiment):
     def figure(self, result: ExperimentResult) -> Figure:
         self._check_result(result)
         d, p = result.data, result.summary["parameters"]
-        fig = new_figure(figsize=(7.5, 6))
-        ax1, ax2 = fig.subplots(2, 1, sharex=True)
-        plot_indexed_variations(ax1, d["ts"], d["casimir_variation"], symbol=r"\lambda",
-                                ylabel=r"$\lambda_j(t) - \lambda_j(0)$")  # fmt: skip
-        ax1.set_title("Casimirs: variation of the eigenvalues of $iW$")
+        fig, ax2 = eigenvalue_figure(d["ts"], d["casimir_variation"], "iW")
         plot_variation(ax2, d["ts"], d["hamiltonian_variation"], lw=0.8, color="C3",
                        ylabel=r"$H(t) - H(0)$", labels=["Hamiltonian"])  # fmt: skip
         ax2.set_title("Hamiltonian variation (bounded, $O(h^2)$)")
-        ax2.set_xlabel("t")
         fig.suptitle(
             f"Generalized rigid body on so({p['n']}), IsoMP ({p['solver']}, rtol = "
             f"{p['rtol']:g}), h = {p['h']:g}, T = {p['T']:g}"
