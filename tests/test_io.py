@@ -6,6 +6,7 @@ import gc
 import json
 import tracemalloc
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -84,12 +85,13 @@ class _Interrupt(Exception):
     pass
 
 
-def test_interrupted_run_resumes_bit_for_bit(tmp_path: Path, monkeypatch) -> None:
+def _interrupted_run(path: Path, monkeypatch) -> Any:
+    """The reference run, and ``path`` holding the same run interrupted after three chunks
+    (an exception raised by the compiled runner's fourth chunk)."""
     from isoflow._compiled.runner import CompiledRunner
 
     cfg, problem, y0, method, kw = _build()
     ref = iso.solve(problem, method, y0, **kw, progress=False)
-    path = tmp_path / "rb.h5"
     calls = {"n": 0}
     original = CompiledRunner.advance
 
@@ -105,6 +107,12 @@ def test_interrupted_run_resumes_bit_for_bit(tmp_path: Path, monkeypatch) -> Non
             problem, method, y0, **kw, progress=False, writer=io.HDF5Writer(path, cfg, chunk_rows=8)
         )
     monkeypatch.setattr(CompiledRunner, "advance", original)
+    return ref
+
+
+def test_interrupted_run_resumes_bit_for_bit(tmp_path: Path, monkeypatch) -> None:
+    path = tmp_path / "rb.h5"
+    ref = _interrupted_run(path, monkeypatch)
     part = io.info(path)
     # the interrupt kept every chunk done before it: the rows and a checkpoint after them
     assert not part["complete"] and 0 < part["step"] < 700
@@ -234,26 +242,8 @@ def _to_version_1(path: Path) -> None:
 
 
 def test_version_1_files_read_and_resume_to_version_2(tmp_path: Path, monkeypatch) -> None:
-    from isoflow._compiled.runner import CompiledRunner
-
-    cfg, problem, y0, method, kw = _build()
-    ref = iso.solve(problem, method, y0, **kw, progress=False)
     path = tmp_path / "v1.h5"
-    calls = {"n": 0}
-    original = CompiledRunner.advance
-
-    def flaky(self, *args, **kwargs):
-        calls["n"] += 1
-        if calls["n"] == 4:
-            raise _Interrupt
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(CompiledRunner, "advance", flaky)
-    with pytest.raises(_Interrupt):
-        iso.solve(
-            problem, method, y0, **kw, progress=False, writer=io.HDF5Writer(path, cfg, chunk_rows=8)
-        )
-    monkeypatch.setattr(CompiledRunner, "advance", original)
+    ref = _interrupted_run(path, monkeypatch)
     _to_version_1(path)
     part = io.info(path)
     assert part["format_version"] == 1 and part["state"] == "stopped" and part["resumable"]
