@@ -469,10 +469,7 @@ def solve(
         The writer failed (disk full, ...): the file holds the run up to its last checkpoint.
     """
     _check_objects(problem, method, writer)
-    if isinstance(save_every, bool) or not isinstance(save_every, (int, np.integer)):
-        raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
-    if save_every < 1:
-        raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
+    _check_save_every(save_every)
     dt_, n = time_grid(t0, t1, dt, n_steps)
     W = _check_state(problem, y0, "y0")
     return _run(
@@ -480,6 +477,13 @@ def solve(
         t0=float(t0), dt=dt_, n=n, save_every=int(save_every), diagnostics=diagnostics,
         progress=progress, throw=throw, writer=writer, fresh=True,
     )  # fmt: skip
+
+
+def _check_save_every(save_every: Any) -> None:
+    """``save_every`` is a positive integer (``ParameterError`` otherwise)."""
+    ok = isinstance(save_every, (int, np.integer)) and not isinstance(save_every, bool)
+    if not ok or save_every < 1:
+        raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
 
 
 def check_restart(
@@ -505,8 +509,7 @@ def check_restart(
     """
     _check_objects(problem, method, writer)
     dt_, n = time_grid(t0, None, dt, n_steps)
-    if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
-        raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
+    _check_save_every(save_every)
     if not 0 <= state.step <= n:
         raise ParameterError(f"checkpoint step {state.step} outside the run's 0..{n} steps")
     W = _check_state(problem, state.y, "checkpoint state")
