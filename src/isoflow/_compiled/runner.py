@@ -462,15 +462,15 @@ class CompiledRunner(Runner):
             return out.reshape(R, self.M, self.S)
         return np.empty((R, self.M, self.S), self.W.dtype)
 
-    def _call(self, drive: Any, args: tuple[Any, ...], what: str) -> None:
-        """Run the compiled ``drive`` on ``args``; the first call compiles it (timed, with
-        the compile notice), later calls reuse it."""
+    def _call(self, make_drive: Any, args: tuple[Any, ...], what: str) -> None:
+        """Run the compiled driver on ``args``; the first call gets it from ``make_drive()``
+        and compiles it (timed, with the compile notice), later calls reuse it."""
         if self._drive is None:
             from .notice import compile_notice
 
             start = time.perf_counter()
             with compile_notice(what):
-                drive = drive()
+                drive = make_drive()
                 drive(*args)
             self._drive = drive
             self.compile_seconds = time.perf_counter() - start
