@@ -354,17 +354,31 @@ LONG = {
 
 
 def _running_task(directory: Path, spec, timeout: float = 60.0) -> tuple[str, int]:
-    """A task with a checkpointed result file and no summary yet, and its worker's pid."""
+    """A running task checkpointed past step 0 and less than half done, and its worker's pid.
+
+    Less than half done, so that it is still running when killed a moment later (the workers
+    of a killed client notice within a fraction of a second); past step 0, so that it resumes.
+    """
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         for t in spec.tasks:
             p = task_paths(directory, t.id)
-            if p.h5.exists() and not p.json.exists() and p.lock.exists():
+            if not (p.h5.exists() and p.lock.exists()) or p.json.exists():
+                continue
+            try:
+                step = iso.io.info(p.h5)["step"]
                 text = p.lock.read_text().strip()
-                if text:
-                    return t.id, int(text)
+            except (iso.IsoflowError, OSError):  # being created or replaced right now
+                continue
+            if text and step and 0 < step < spec.run["n_steps"] // 2:
+                return t.id, int(text)
         time.sleep(0.01)
     raise AssertionError("no task was seen running")
+
+
+def _read_log(directory: Path, task_id: str) -> str:
+    path = task_paths(directory, task_id).log
+    return path.read_text() if path.exists() else ""
 
 
 def _alive(pid: int) -> bool:
@@ -442,6 +456,7 @@ def test_client_killed_and_restarted_finishes_like_an_uninterrupted_run(
     assert f"{len(done)} already done" in again.stdout
     for tid, text in done.items():  # not recomputed
         assert task_paths(d, tid).json.read_text() == text
-    assert any("resumed" in task_paths(d, t.id).log.read_text() for t in spec.tasks)
+    logs = {t.id: _read_log(d, t.id) for t in spec.tasks}
+    assert any("resumed" in text for text in logs.values()), logs
     iso.sweep(spec, tmp_path / "ref", client=client, progress=False)
     _assert_same_results(d, tmp_path / "ref")
