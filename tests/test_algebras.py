@@ -168,3 +168,51 @@ def test_sp_involution_is_J_transpose_J() -> None:
 def test_bad_sizes_raise(factory, arg) -> None:
     with pytest.raises(iso.ParameterError, match=r"size|positive integer"):
         factory(arg)
+
+
+def _skew(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    A = rng.standard_normal(shape)
+    return A - np.swapaxes(A, -1, -2)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 10, 11, 40, 192, 193])
+def test_so_casimirs_in_real_arithmetic_match_the_complex_hermitian_route(n: int) -> None:
+    """so(n)'s Casimirs (a real Householder reduction to a symmetric tridiagonal matrix, up to
+    SKEW_MAX) agree with LAPACK's eigenvalues of the Hermitian iW to 8 eps |W|."""
+    from isoflow._eig import SKEW_MAX
+
+    rng = np.random.default_rng(n)
+    W = _skew(rng, (3 if n > 40 else 50, n, n))
+    W[0] *= 1e-150  # scaled by a power of two: neither overflow nor underflow
+    W[1] *= 1e150
+    got = iso.algebras.so(n).casimirs(W)
+    want = np.linalg.eigvalsh(1j * W)
+    norm = np.linalg.norm(W, axis=(-2, -1))[:, None]
+    assert got.shape == want.shape
+    assert np.all(np.abs(got - want) <= 8 * np.finfo(float).eps * norm)
+    assert np.all(np.diff(got, axis=-1) >= 0)  # ascending
+    assert (n > SKEW_MAX) == (n == 193)
+
+
+def test_so_casimirs_of_degenerate_spectra() -> None:
+    """Zero, rank-two, repeated blocks and an odd size's zero eigenvalue."""
+    rng = np.random.default_rng(1)
+    block = _skew(rng, (3, 3))
+    W = np.zeros((4, 9, 9))
+    W[1, 0, 4], W[1, 4, 0] = 2.5, -2.5  # rank two
+    for k in range(3):  # one block three times: every eigenvalue thrice
+        W[2, 3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = block
+    W[3] = _skew(rng, (9, 9))
+    got = iso.algebras.so(9).casimirs(W)
+    want = np.linalg.eigvalsh(1j * W)
+    norm = np.maximum(np.linalg.norm(W, axis=(-2, -1)), 1.0)[:, None]
+    assert np.all(np.abs(got - want) <= 8 * np.finfo(float).eps * norm)
+    assert np.all(got[0] == 0.0)
+    assert np.abs(got[3, 4]) <= 8 * np.finfo(float).eps * norm[3, 0]  # odd n: a zero
+
+
+def test_so_casimirs_of_non_finite_states_raise_like_lapack() -> None:
+    W = np.zeros((2, 4, 4))
+    W[1, 0, 1], W[1, 1, 0] = np.nan, np.nan
+    with pytest.raises(np.linalg.LinAlgError, match="infs or NaNs"):
+        iso.algebras.so(4).casimirs(W)

@@ -462,6 +462,16 @@ class CompiledRunner(Runner):
             return out.reshape(R, self.M, self.S)
         return np.empty((R, self.M, self.S), self.W.dtype)
 
+    @property
+    def _chunk(self) -> int:
+        """Members (blocks, for :class:`BlockedRunner`) per piece of a parallel call, handed
+        out to the threads as they come free: about 16 pieces per thread, so that a thread
+        slowed by other work (the writer thread's diagnostics of the saved rows) leaves its
+        remaining pieces to the others instead of holding up the end of the call. Members
+        are independent: the pieces do not change any result."""
+        items = getattr(self, "nb", self.M)
+        return max(1, items // (16 * _threads()))
+
     def _call(self, make_drive: Any, args: tuple[Any, ...], what: str) -> None:
         """Run the compiled driver on ``args``; the first call gets it from ``make_drive()``
         and compiles it (timed, with the compile notice), later calls reuse it."""
@@ -474,6 +484,11 @@ class CompiledRunner(Runner):
                 drive(*args)
             self._drive = drive
             self.compile_seconds = time.perf_counter() - start
+        elif self.parallel:
+            import numba
+
+            with numba.parallel_chunksize(self._chunk):
+                self._drive(*args)
         else:
             self._drive(*args)
 

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._eig import eigvalsh
+from .._eig import skew_eigvalsh
 from ._base import MatrixAlgebra
 
 __all__ = ["SpecialOrthogonal", "so"]
@@ -32,7 +32,7 @@ class SpecialOrthogonal(MatrixAlgebra):
         return -np.swapaxes(Y, -1, -2)
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
-        return eigvalsh(1j * W)
+        return skew_eigvalsh(W)
 
 
 def so(n: int) -> SpecialOrthogonal:
