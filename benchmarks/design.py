@@ -38,6 +38,7 @@ import numpy as np
 import isoflow as iso
 from isoflow._compiled import compiled_runner
 from isoflow._stepping import PythonRunner
+from suite import two_products
 
 __all__ = ["BENCHMARKS"]
 
@@ -77,15 +78,15 @@ def _paired_per_iteration(
 
 
 def _two_products(evaluate_B: Callable[[Any, Any], None], X: Any, reps: int) -> Callable[[], None]:
-    """``reps`` times: ``B = B(X)`` into a buffer, ``P = B X``, ``T = P B`` (NumPy, BLAS):
-    the bare work of one IsoMP iteration."""
+    """``reps`` times: ``B = B(X)`` into a buffer, ``P = B X``, ``T = P B`` (BLAS, the
+    library of the compiled paths: :func:`suite.two_products`): the bare work of one IsoMP
+    iteration."""
     B, P, T = (np.empty_like(X) for _ in range(3))
 
     def go() -> None:
         for _ in range(reps):
             evaluate_B(X, B)
-            np.matmul(B, X, out=P)
-            np.matmul(P, B, out=T)
+            two_products(B, X, P, T)
 
     return go
 

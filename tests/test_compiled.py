@@ -9,6 +9,7 @@ the two runs are compared. No timing assertions here (speed: ``benchmarks/``).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
 import subprocess
 import sys
@@ -139,6 +140,13 @@ CASES: dict[str, tuple[Callable[[], tuple], iso.Method, float, int, int]] = {
         4,
         1,
     ),
+    "u(70) BLAS, a short last row block": (
+        lambda: _elementwise(iso.algebras.u(70)),
+        IsoMP(),
+        0.1,
+        4,
+        1,
+    ),
     "so(40) BLAS ensemble 3": (
         lambda: (lambda p, w: (p, np.stack([w, 0.5 * w, 1.5 * w])))(
             *_elementwise(iso.algebras.so(40))
@@ -199,6 +207,23 @@ CASES: dict[str, tuple[Callable[[], tuple], iso.Method, float, int, int]] = {
         5,
     ),
 }
+
+
+def test_lower_blocks_cover_the_rows_in_tile_aligned_pieces() -> None:
+    """The triangular product's row blocks: contiguous, tile aligned, two or more from
+    ``n = 2 * tile`` (one block is a full product), at most eight; packed size <= n^2."""
+    from isoflow._compiled import dense
+
+    tile = dense._TILE
+    for n in range(1, 1100, 7):
+        blocks = dense.lower_blocks(n)
+        assert blocks[0][0] == 0 and blocks[-1][1] == n
+        assert all(a[1] == b[0] for a, b in itertools.pairwise(blocks))
+        assert all(r0 % tile == 0 and r1 > r0 for r0, r1 in blocks)
+        assert len(blocks) <= 8
+        if n >= 2 * tile:
+            assert len(blocks) >= 2
+        assert sum((r1 - r0) * r1 for r0, r1 in blocks) <= n * n
 
 
 @pytest.mark.parametrize("name", list(CASES))

@@ -66,7 +66,7 @@ def lower_blocks(n: int, block: int = _BLOCK) -> list[tuple[int, int]]:
 
     At least two blocks once ``n >= 2 * _TILE`` (one block is a full product), at most eight.
     """
-    nb = min(8, max(1, round(n / block)))
+    nb = min(8, max(2 if n >= 2 * _TILE else 1, round(n / block)))
     size = -(-n // nb)
     size = -(-size // _TILE) * _TILE
     return [(r0, min(n, r0 + size)) for r0 in range(0, n, size)]
