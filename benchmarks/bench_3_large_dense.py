@@ -14,7 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from suite import StepTimer, benchmark, paired_best_times, record, two_products
+from suite import (
+    StepTimer,
+    benchmark,
+    combining_pass_seconds,
+    paired_best_times,
+    record,
+    two_products,
+)
 
 
 @benchmark(3, "dense so(n), u(n), n = 256..1024: time per iteration against two products")
@@ -57,7 +64,7 @@ def run(quick: bool) -> list[dict[str, Any]]:
                 _, t_two = paired_best_times(compiled, two, repeats=3)
                 t_it = min(per_it)
                 ratio = t_it / t_two
-                t_pass = _combining_pass_time(alg, A, Bm)
+                t_pass = combining_pass_seconds(alg, A, Bm)
                 why = {} if ratio <= 1.15 else {
                     "why": f"the combining pass (bracket, iterate, residual, mirror into V) "
                            f"takes {t_pass / t_two:.2f} of two products on one thread while "
@@ -75,25 +82,6 @@ def run(quick: bool) -> list[dict[str, Any]]:
                     )
                 )  # fmt: skip
     return out
-
-
-def _combining_pass_time(alg: Any, X: Any, P: Any) -> float:
-    """Best time of the compiled loop's pass after the two products (:func:`isoflow._compiled.
-    dense._combine`: bracket, next iterate, residual, mirrored into ``V``), on one thread."""
-    from isoflow._compiled import dense
-
-    n = alg.shape[0]
-    _, rowoff = dense.packed_row_offsets(n)
-    Tp = np.zeros(n * n, dtype=X.dtype)
-    G = np.empty_like(X)
-    s = -1.0  # both spaces are skew
-    dense._combine(X, X, P, Tp, rowoff, G, s, 0.05, 0.0025)
-    best = np.inf
-    for _ in range(5):
-        t = time.perf_counter()
-        dense._combine(X, X, P, Tp, rowoff, G, s, 0.05, 0.0025)
-        best = min(best, time.perf_counter() - t)
-    return float(best)
 
 
 if __name__ == "__main__":

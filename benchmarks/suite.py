@@ -186,6 +186,49 @@ def _two_products_compiled() -> Any:
     return _TWO_PRODUCTS[0]
 
 
+def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
+    """Best time of the compiled loop's pass after the two products (:func:`isoflow._compiled.
+    dense._combine`: bracket, next iterate, residual, mirrored into ``V``), on one thread;
+    repeated inside a compiled loop (about 2e6 entries a call) so that small ``n`` is not
+    timed with a Python call's overhead."""
+    from isoflow._compiled import dense
+
+    n = alg.shape[0]
+    _, rowoff = dense.packed_row_offsets(n)
+    Tp = np.zeros(n * n, dtype=X.dtype)
+    G = np.empty_like(X)
+    s = -1.0  # both spaces are skew
+    reps = max(1, int(2e6 / n**2))
+    loop = _combine_loop()
+    loop(X, X, P, Tp, rowoff, G, s, 1)
+    best = np.inf
+    for _ in range(5):
+        t = time.perf_counter()
+        loop(X, X, P, Tp, rowoff, G, s, reps)
+        best = min(best, time.perf_counter() - t)
+    return float(best / reps)
+
+
+_COMBINE_LOOP: list[Any] = []
+
+
+def _combine_loop() -> Any:
+    if not _COMBINE_LOOP:
+        import numba
+
+        from isoflow._compiled import dense
+
+        combine = dense._combine
+
+        @numba.njit
+        def loop(W, X, P, Tp, rowoff, G, s, reps):  # type: ignore[no-untyped-def]
+            for _ in range(reps):
+                combine(W, X, P, Tp, rowoff, G, s, 0.05, 0.0025)
+
+        _COMBINE_LOOP.append(loop)
+    return _COMBINE_LOOP[0]
+
+
 def best_time(fn: Callable[[], Any], repeats: int = 5, min_time: float = 0.0) -> float:
     """Best (smallest) wall time of ``fn()`` over ``repeats`` runs, after one warm-up run.
 
