@@ -245,7 +245,8 @@ def bench_10(quick: bool) -> list[dict[str, Any]]:
             why = {} if ratio <= 1.5 else {
                 "why": f"the pass after the products (bracket, next iterate, residual, mirrored "
                        f"into V) takes {t_pass / (t_bare / reps):.2f} of the bare iteration at "
-                       "this size; the rest is the driver's per-iteration work"
+                       "this size (one tile, scalar); the rest is the driver's per-iteration "
+                       "work (stopping rule, swap) and the extrapolated guess"
             }  # fmt: skip
             out.append(
                 {"id": 10, "name": f"dense {alg.name}: time per iteration / two products + B",
