@@ -55,7 +55,7 @@ def skew_eigvalsh(W: Any) -> NDArray[np.float64]:
     from ._eig_compiled import skew_eigvalsh_stack, skew_eigvalsh_stack_parallel
 
     W = np.asarray(W)
-    if W.shape[-1] > SKEW_MAX:
+    if W.shape[-1] > SKEW_MAX or np.iscomplexobj(W):
         return eigvalsh(1j * W)
     if W.dtype.kind != "f":
         W = W.astype(np.float64)

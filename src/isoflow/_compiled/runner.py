@@ -463,14 +463,18 @@ class CompiledRunner(Runner):
         return np.empty((R, self.M, self.S), self.W.dtype)
 
     @property
+    def _parallel_items(self) -> int:
+        """What a parallel call spreads over the threads: the members."""
+        return self.M
+
+    @property
     def _chunk(self) -> int:
-        """Members (blocks, for :class:`BlockedRunner`) per piece of a parallel call, handed
-        out to the threads as they come free: about 16 pieces per thread, so that a thread
-        slowed by other work (the writer thread's diagnostics of the saved rows) leaves its
-        remaining pieces to the others instead of holding up the end of the call. Members
-        are independent: the pieces do not change any result."""
-        items = getattr(self, "nb", self.M)
-        return max(1, items // (16 * _threads()))
+        """Items per piece of a parallel call, handed out to the threads as they come free:
+        about 16 pieces per thread, so that a thread slowed by other work (the writer thread's
+        diagnostics of the saved rows) leaves its remaining pieces to the others instead of
+        holding up the end of the call. Members are independent: the pieces do not change
+        any result."""
+        return max(1, self._parallel_items // (16 * _threads()))
 
     def _call(self, make_drive: Any, args: tuple[Any, ...], what: str) -> None:
         """Run the compiled driver on ``args``; the first call gets it from ``make_drive()``
@@ -559,6 +563,11 @@ class BlockedRunner(CompiledRunner):
         valid[: self.M] = True
         self.valid = valid.reshape(nb, blocked.LANES)
         self.parallel = nb >= 2 and _threads() > 1
+
+    @property
+    def _parallel_items(self) -> int:
+        """What a parallel call spreads over the threads: the blocks of members."""
+        return self.nb
 
     def _blocks_from_members(self) -> None:
         """The blocks (state, ring, head) from the member arrays."""
