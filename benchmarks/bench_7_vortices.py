@@ -8,6 +8,7 @@ Run alone: ``python benchmarks/bench_7_vortices.py``.
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from typing import Any
@@ -108,7 +109,23 @@ def _call_seconds(timer: Any) -> float:
     return float(best)
 
 
-_STAGE_LOOP: list[Any] = []
+@functools.cache
+def _stage_loop() -> Any:
+    """Compiled loop: ``its`` iterations of the stage from ``X = W``, then the new state."""
+    import numba
+
+    @numba.njit
+    def loop(iterate, finish, f, fargs, sp, W, X, G, aux, work, Wn, h, its, n):  # type: ignore[no-untyped-def]
+        half, quarter = 0.5 * h, 0.25 * h * h
+        for _ in range(n):
+            X[:] = W
+            for _ in range(its):
+                iterate(f, fargs, sp, W, X, G, aux, work, half, quarter)
+                X, G = G, X
+            finish(f, fargs, sp, W, X, aux, work, h, Wn)
+            W[:] = Wn
+
+    return loop
 
 
 def _stage_only_seconds(runner: Any, its: int, h: float, n: int) -> float:
@@ -120,23 +137,7 @@ def _stage_only_seconds(runner: Any, its: int, h: float, n: int) -> float:
     kernel through numba's first-class function types (what lets one compiled driver serve
     every kernel without compiling per kernel).
     """
-    import numba
-
-    if not _STAGE_LOOP:
-
-        @numba.njit
-        def loop(iterate, finish, f, fargs, sp, W, X, G, aux, work, Wn, h, its, n):  # type: ignore[no-untyped-def]
-            half, quarter = 0.5 * h, 0.25 * h * h
-            for _ in range(n):
-                X[:] = W
-                for _ in range(its):
-                    iterate(f, fargs, sp, W, X, G, aux, work, half, quarter)
-                    X, G = G, X
-                finish(f, fargs, sp, W, X, aux, work, h, Wn)
-                W[:] = Wn
-
-        _STAGE_LOOP.append(loop)
-    loop = _STAGE_LOOP[0]
+    loop = _stage_loop()
     L = runner.layout
     W = runner.W[0].copy()
     X, G, aux, Wn = (np.empty_like(W) for _ in range(4))

@@ -25,6 +25,7 @@ The compiled time loops are reached the way :func:`isoflow.solve` reaches them:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib.util
 import math
 import platform
@@ -170,20 +171,16 @@ def two_products(B: Any, X: Any, P: Any, T: Any) -> None:
     _two_products_compiled()(B, X, P, T)
 
 
-_TWO_PRODUCTS: list[Any] = []
-
-
+@functools.cache
 def _two_products_compiled() -> Any:
-    if not _TWO_PRODUCTS:
-        import numba
+    import numba
 
-        @numba.njit(cache=True)
-        def products(B, X, P, T):  # type: ignore[no-untyped-def]
-            np.dot(B, X, P)
-            np.dot(P, B, T)
+    @numba.njit(cache=True)
+    def products(B, X, P, T):  # type: ignore[no-untyped-def]
+        np.dot(B, X, P)
+        np.dot(P, B, T)
 
-        _TWO_PRODUCTS.append(products)
-    return _TWO_PRODUCTS[0]
+    return products
 
 
 def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
@@ -209,24 +206,20 @@ def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
     return float(best / reps)
 
 
-_COMBINE_LOOP: list[Any] = []
-
-
+@functools.cache
 def _combine_loop() -> Any:
-    if not _COMBINE_LOOP:
-        import numba
+    import numba
 
-        from isoflow._compiled import dense
+    from isoflow._compiled import dense
 
-        combine = dense._combine
+    combine = dense._combine
 
-        @numba.njit
-        def loop(W, X, P, Tp, rowoff, G, s, reps):  # type: ignore[no-untyped-def]
-            for _ in range(reps):
-                combine(W, X, P, Tp, rowoff, G, s, 0.05, 0.0025)
+    @numba.njit
+    def loop(W, X, P, Tp, rowoff, G, s, reps):  # type: ignore[no-untyped-def]
+        for _ in range(reps):
+            combine(W, X, P, Tp, rowoff, G, s, 0.05, 0.0025)
 
-        _COMBINE_LOOP.append(loop)
-    return _COMBINE_LOOP[0]
+    return loop
 
 
 def best_time(fn: Callable[[], Any], repeats: int = 5, min_time: float = 0.0) -> float:

@@ -478,23 +478,24 @@ class CompiledRunner(Runner):
 
     def _call(self, make_drive: Any, args: tuple[Any, ...], what: str) -> None:
         """Run the compiled driver on ``args``; the first call gets it from ``make_drive()``
-        and compiles it (timed, with the compile notice), later calls reuse it."""
+        and compiles it (timed, with the compile notice), later calls reuse it. A parallel
+        driver hands out its items in pieces of :attr:`_chunk`."""
+        import numba
+
+        chunk = self._chunk if self.parallel else 0  # 0: numba's static split
         if self._drive is None:
             from .notice import compile_notice
 
             start = time.perf_counter()
             with compile_notice(what):
                 drive = make_drive()
-                drive(*args)
+                with numba.parallel_chunksize(chunk):
+                    drive(*args)
             self._drive = drive
             self.compile_seconds = time.perf_counter() - start
-        elif self.parallel:
-            import numba
-
-            with numba.parallel_chunksize(self._chunk):
-                self._drive(*args)
         else:
-            self._drive(*args)
+            with numba.parallel_chunksize(chunk):
+                self._drive(*args)
 
     def _finish(self, out: Array, buf: Array, nsteps: int) -> None:
         """Copy the rows from ``buf`` into ``out`` in the user's layout (unless the driver
