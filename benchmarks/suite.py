@@ -185,13 +185,13 @@ def _two_products_compiled() -> Any:
 
 def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
     """Best time of the compiled loop's pass after the two products (:func:`isoflow._compiled.
-    dense._combine`: bracket, next iterate, residual, mirrored into ``V``), on one thread;
+    dense_tiles._combine`: bracket, next iterate, residual, mirrored into ``V``), on one thread;
     repeated inside a compiled loop (about 2e6 entries a call) so that small ``n`` is not
     timed with a Python call's overhead."""
-    from isoflow._compiled import dense
+    from isoflow._compiled import dense_tiles
 
     n = alg.shape[0]
-    _, rowoff = dense.packed_row_offsets(n)
+    _, rowoff = dense_tiles.packed_row_offsets(n)
     Tp = np.zeros(n * n, dtype=X.dtype)
     G = np.empty_like(X)
     s = -1.0  # both spaces are skew
@@ -210,9 +210,9 @@ def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
 def _combine_loop() -> Any:
     import numba
 
-    from isoflow._compiled import dense
+    from isoflow._compiled import dense_tiles
 
-    combine = dense._combine
+    combine = dense_tiles._combine
 
     @numba.njit
     def loop(W, X, P, Tp, rowoff, G, s, reps):  # type: ignore[no-untyped-def]
