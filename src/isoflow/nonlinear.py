@@ -96,7 +96,7 @@ def stopping_step(
     ``floor = stall_rtol s``. Returns ``(code, prev, first)``: a ``STATUS_*`` code
     (:data:`CONTINUE` to go on) and the ``prev`` and ``first`` to pass at the next
     iteration. This one function is the rule everywhere: the Python solvers call it, the
-    compiled kernels of :mod:`isoflow._fast` use a numba compilation of it.
+    compiled driver (:mod:`isoflow._compiled.driver`) uses a numba compilation of it.
     """
     if not math.isfinite(r):
         code = STATUS_NON_FINITE

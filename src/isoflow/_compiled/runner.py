@@ -45,19 +45,6 @@ __all__ = ["CompiledRunner", "compiled_runner", "layout_for"]
 
 Array = NDArray[Any]
 
-#: Compiled drivers of this process by :meth:`CompiledRunner._driver`'s key.
-_DRIVERS: dict[Any, Any] = {}
-
-
-def _type_key(x: Any) -> Any:
-    """What numba types an argument by (arrays: dtype, dimensions, layout, writability)."""
-    if isinstance(x, np.ndarray):
-        return ("array", x.dtype.str, x.ndim, x.flags.c_contiguous, x.flags.writeable)
-    if isinstance(x, tuple):
-        return (type(x), *(_type_key(v) for v in x))
-    return type(x)
-
-
 def _threads() -> int:
     import numba
 
@@ -242,17 +229,13 @@ class CompiledRunner(Runner):
 
     # ---- running -----------------------------------------------------------------------------
     def _driver(self, args: tuple[Any, ...]) -> Any:
-        """The compiled driver of this run (compiled, or loaded from numba's cache, once per
-        process for each field, argument types and stage: later runs reuse it at once)."""
+        """The compiled driver of this run: the stage compiled for the run's types and the
+        driver for its signature (compiled, or loaded from numba's cache, once per process
+        and signature: :func:`~isoflow._compiled.signatures.compiled_driver`)."""
         impl = self.impl
-        key = (self.f, _type_key(self.fargs), self.begin, impl.iterate, impl.finish,
-               _type_key(args), self.parallel)  # fmt: skip
-        drive = _DRIVERS.get(key)
-        if drive is None:
-            dt = DriverTypes(self.f, self.fargs, self.layout.record, self.mp, self.W.dtype)
-            dt.compile_stage(self.begin, impl.iterate, impl.finish)
-            drive = _DRIVERS[key] = compiled_driver(dt.driver_signature(args), self.parallel)
-        return drive
+        dt = DriverTypes(self.f, self.fargs, self.layout.record, self.mp, self.W.dtype)
+        dt.compile_stage(self.begin, impl.iterate, impl.finish)
+        return compiled_driver(dt.driver_signature(args), self.parallel)
 
     def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
         grid = SaveGrid(save_every, k_final)
