@@ -46,8 +46,7 @@ def run_sweep(out):
         Client(cluster) as client,
     ):
         iso.sweep(SPEC, out, client=client, progress=False)
-    open_sweep = getattr(iso.io, "open_sweep", None) or iso.sweep.open_sweep
-    return open_sweep(out).sortby("member")
+    return iso.sweep.open_sweep(out).sortby("member")
 
 
 if not (available("isoflow.sweep") and available("distributed")):
