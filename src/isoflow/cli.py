@@ -30,7 +30,9 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -211,7 +213,9 @@ def _build_parser() -> argparse.ArgumentParser:
     info.add_argument("file", help="an isoflow result file (HDF5) or a sweep directory")
     info.add_argument("--json", action="store_true", help="print JSON")
     info.add_argument(
-        "--verify", action="store_true", help="also check every saved state's checksum"
+        "--verify",
+        action="store_true",
+        help="also check every saved state's checksum (a sweep: every task file's SHA-256)",
     )
     info.set_defaults(func=_info, computes=False)
 
@@ -437,6 +441,9 @@ def _resume(args: argparse.Namespace) -> int:
         "chunk_rows": args.chunk_rows,
         "flush_seconds": args.flush_seconds,
     }
+    sweep_note = _sweep_task_note(args.resume, io.info(args.resume)["config"])
+    if sweep_note is not None:
+        raise UserError(f"{args.resume} is {sweep_note}")
     name = _model_name(args)
     if name is None:
         if args.param:
@@ -490,9 +497,13 @@ def _info(args: argparse.Namespace) -> int:
         print(json.dumps(data, indent=2))
         return 0
     cfg, meta, run_info = data["config"], data["meta"], data["run_info"]
-    state = f"{data['state']}: {data['state_message']}".rstrip(": ")
+    sweep_note = _sweep_task_note(args.file, cfg)
+    message = data["state_message"]
+    if sweep_note is not None:  # resumed by its sweep, not by isoflow run
+        message = message.split("; resume with isoflow run --resume")[0]
+    state = f"{data['state']}: {message}".rstrip(": ")
     model = str(cfg.get("model", "(not registered)"))
-    if "model" in cfg and model not in registry.MODELS:
+    if "model" in cfg and model not in registry.MODELS and sweep_note is None:
         model += f" (not built in: resume with --model {model})"
     lines = [
         f"{data['path']}: isoflow result file (written by isoflow {data['isoflow_version']}, "
@@ -517,6 +528,8 @@ def _info(args: argparse.Namespace) -> int:
             f"(iterations mean {st.get('iterations_mean', float('nan')):.2f})"
         )
     lines += [f"  {k:<24} {v:.3e}" for k, v in data["drifts"].items()]
+    if sweep_note is not None:
+        lines.append(f"  {'sweep':<24} {sweep_note}")
     print("\n".join(lines))
     return 0
 
@@ -530,47 +543,80 @@ def _add_sweep_parser(sub: Any) -> None:
         help="run a sweep (sweep.toml: a model, a method, a table of members) on dask",
         description=(
             "Run the members of a sweep file as batched ensembles in dask workers, each task "
-            "streamed to DIR/tasks/<id>.h5; run it again to resume. Needs isoflow[sweep]."
+            "streamed to DIR/tasks/<id>.h5; run it again to resume. Needs isoflow[sweep]. "
+            "Exit status 0: every member finished; 1: a member failed, a task raised, or an "
+            "error (one line); 2: a bad command line."
         ),
     )
-    sw.add_argument("file", help="the sweep file (TOML; see the isoflow.sweep docstring)")
+    sw.add_argument("file", help="the sweep file (TOML; see the user guide's page on sweeps)")
     sw.add_argument("--out", metavar="DIR", help="the sweep directory (default: the file's out)")
     where = sw.add_mutually_exclusive_group()
     where.add_argument(
-        "--workers", type=_positive_int, metavar="K", help="local worker processes (default: cores)"
+        "--workers",
+        type=_positive_int,
+        metavar="K",
+        help="local worker processes (default and most: the cores available)",
     )
     where.add_argument("--scheduler", metavar="ADDR", help="a running dask scheduler to use")
     sw.add_argument(
+        "--connect-timeout",
+        type=_positive_float,
+        default=30.0,
+        metavar="SECONDS",
+        help="how long to wait for --scheduler to answer (default 30 s)",
+    )
+    sw.add_argument(
         "--retries", type=int, default=2, metavar="R", help="worker deaths a task survives (2)"
     )
-    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.add_argument("--quiet", action="store_true", help="no progress")
     sw.set_defaults(func=_sweep, computes=False)
+
+
+@contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """Show warnings as one ``isoflow: warning: ...`` line each on stderr."""
+
+    def show(message: Any, category: Any, *args: Any, **kwargs: Any) -> None:
+        print(f"isoflow: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _sweep(args: argparse.Namespace) -> int:
     from .sweep import read_spec, sweep
+    from .sweep.spec import require_extra
 
+    require_extra("dask", "distributed", "xarray")
     spec = read_spec(args.file)
-    result = sweep(
-        spec,
-        args.out,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        retries=args.retries,
-        progress=not args.quiet,
-    )
+    with _warnings_as_lines():
+        result = sweep(
+            spec,
+            args.out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            retries=args.retries,
+            connect_timeout=args.connect_timeout,
+            progress=not args.quiet,
+        )
     print(result)
+    for tid, msg in result.redone.items():
+        print(f"  task {tid} redone: {msg}")
     for tid, msg in result.errors.items():
         print(f"  task {tid} raised: {msg}")
     if result.failed_members:
-        print(f"  failed members: {', '.join(map(str, result.failed_members))} (isoflow info DIR)")
-    return 1 if result.errors else 0
+        shown = ", ".join(map(str, result.failed_members[:20]))
+        more = len(result.failed_members) - 20
+        shown += f" and {more} more" if more > 0 else ""
+        print(f"  failed members: {shown} (isoflow info {result.path})")
+    return 0 if result.success else 1
 
 
 def _info_sweep(args: argparse.Namespace) -> int:
     from .sweep import status
 
-    data = status(args.file)
+    data = status(args.file, verify=args.verify)
     if args.json:
         print(json.dumps(data, indent=2))
         return 0
@@ -583,8 +629,12 @@ def _info_sweep(args: argparse.Namespace) -> int:
         + ("" if data["tasks"] == 1 else "s")
         + ("" if data["perturb"] is None else f" (perturb {data['perturb']:g})"),
         f"  {'tasks':<24} {data['done']} done, {data['partial']} partial, "
-        f"{data['pending']} not started",
+        f"{data['pending']} not started"
+        + (f", {len(data['damaged'])} damaged" if data["damaged"] else "")
+        + (", every result file verified" if args.verify else ""),
     ]
+    for tid, msg in data["damaged"].items():
+        lines.append(f"  {'task ' + tid:<24} damaged: {msg}")
     for tid, msg in data["errors"].items():
         lines.append(f"  {'task ' + tid:<24} raised: {msg}")
     for i, f in data["failed_members"].items():
@@ -592,6 +642,18 @@ def _info_sweep(args: argparse.Namespace) -> int:
     lines += [f"  {k:<24} {v:.3e} (worst finished member)" for k, v in data["drifts"].items()]
     print("\n".join(lines))
     return 0
+
+
+def _sweep_task_note(path: str, config: dict[str, Any]) -> str | None:
+    """For a sweep's task file: how to continue it (running its sweep again), else ``None``."""
+    mark = config.get("sweep")
+    if not isinstance(mark, dict):
+        return None
+    directory = Path(path).resolve().parent.parent
+    return (
+        f"task {mark.get('task')} of the sweep in {directory}: run the sweep again to resume "
+        f"it (isoflow sweep SWEEP.toml --out {directory}), not isoflow run --resume"
+    )
 
 
 def _plot(args: argparse.Namespace) -> int:
