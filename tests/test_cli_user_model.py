@@ -95,7 +95,7 @@ def test_user_model_mistakes_are_one_line_errors(tmp_path: Path, args, pattern) 
 def test_entry_point_model_from_the_command_line(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from isoflow._compiled import notice
+    from isoflow import _compile_clock as notice
 
     eps = [importlib.metadata.EntryPoint("toy", "user_models:TOY_SPEC", registry.ENTRY_POINT_GROUP)]
     monkeypatch.setattr(importlib.metadata, "entry_points", lambda **kw: eps)

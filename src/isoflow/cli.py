@@ -278,10 +278,10 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _announce_compiles() -> None:
-    """Say on stderr when a run compiles its loops, and how long that took."""
-    from ._compiled import notice
+    """Say on stderr when a run compiles, also in runs without a progress bar (``--quiet``)."""
+    from . import _compile_clock
 
-    notice.SHOW = True
+    _compile_clock.SHOW = True
 
 
 def _progress(args: argparse.Namespace) -> bool | None:

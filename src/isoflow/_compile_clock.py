@@ -1,0 +1,193 @@
+"""Timing and announcing what numba does during a run: compiling, and loading from its cache.
+
+numba reports two events (``numba.core.event``): ``numba:compiler_lock`` around everything it
+does to get machine code for a new signature (load it from the on-disk cache, or compile it),
+and ``numba:compile`` around a compilation proper (a cache miss). :func:`compile_clock` listens
+to both while a run executes (:func:`isoflow.solve`, a restart):
+
+* the seconds spent inside the compiler lock by the run's thread are the run's
+  :attr:`isoflow.SolveStats.compile_time`: compiling (or loading) the user's function, the
+  wrapper that calls it from Python, the validation calls of ``B`` before the loop and the
+  compiled loops, all of it;
+* every compilation is announced on stderr when it starts and when it ends (and on the
+  ``isoflow`` logger at INFO), so that a first run that compiles for half a minute does not
+  look hung. Loading from the cache is quick and is not announced.
+
+:func:`compile_notice` names what compiles inside a block (the time loop's first chunk names
+its compiled loop); a compilation outside any such block is named by its function.
+
+Compilations in other threads (another run, the writer thread) are neither counted nor
+announced here. This module imports numba only when a clock starts.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+__all__ = ["SHOW", "CompileClock", "compile_clock", "compile_notice"]
+
+log = logging.getLogger("isoflow")
+
+#: Announce compilations on stderr even in runs with ``progress=False`` (the command line
+#: sets it: its runs announce what they compile whatever their progress bars do).
+SHOW = False
+
+_current = threading.local()
+
+
+class CompileClock:
+    """numba's work in one thread while a run executes (see the module docstring).
+
+    Attributes
+    ----------
+    started : float
+        When the clock started (``time.perf_counter()``).
+    seconds : float
+        Time spent obtaining machine code (compiling or loading from the cache) so far.
+    compiled : int
+        Compilations announced so far (cache misses; nested ones count with the outer one).
+    """
+
+    def __init__(self, show: bool) -> None:
+        self.show = show
+        self.started = time.perf_counter()
+        self.seconds = 0.0
+        self.compiled = 0
+        self.thread = threading.get_ident()
+        self.labels: list[str] = []
+        self._lock_depth = 0
+        self._lock_started = 0.0
+        self._compile_depth = 0
+        self._compile_started = 0.0
+        self._what = ""
+
+    def _say(self, msg: str) -> None:
+        log.info(msg)
+        if self.show:
+            print(f"isoflow: {msg}", file=sys.stderr, flush=True)
+
+    def lock_entered(self) -> None:
+        """numba starts to get machine code (a cache load or a compilation)."""
+        if self._lock_depth == 0:
+            self._lock_started = time.perf_counter()
+        self._lock_depth += 1
+
+    def lock_left(self) -> None:
+        """numba is done with one request (the outermost one ends the timed interval)."""
+        self._lock_depth -= 1
+        if self._lock_depth == 0:
+            self.seconds += time.perf_counter() - self._lock_started
+
+    def compile_started(self, function: str) -> None:
+        """A compilation starts: announce the outermost one."""
+        self._compile_depth += 1
+        if self._compile_depth > 1:
+            return
+        self._compile_started = time.perf_counter()
+        self._what = self.labels[-1] if self.labels else function
+        first = self.compiled == 0
+        self.compiled += 1
+        self._say(
+            f"compiling {self._what}"
+            + (
+                " (first use of this code here; numba's cache keeps what is compiled with "
+                "cache=True for later processes)..."
+                if first
+                else "..."
+            )
+        )
+
+    def compile_ended(self, failed: bool) -> None:
+        """A compilation ends: say how long the outermost one took."""
+        self._compile_depth -= 1
+        if self._compile_depth == 0 and not failed:
+            self._say(
+                f"compiled {self._what} in {time.perf_counter() - self._compile_started:.1f} s"
+            )
+
+    def close(self) -> None:
+        """Count an interval left open by an error (numba ends its events even then)."""
+        if self._lock_depth > 0:
+            self.seconds += time.perf_counter() - self._lock_started
+            self._lock_depth = 0
+
+
+def _function_name(event: Any) -> str:
+    dispatcher = (event.data or {}).get("dispatcher")
+    return str(getattr(getattr(dispatcher, "py_func", None), "__name__", "a numba function"))
+
+
+def _failed(event: Any) -> bool:
+    """Whether the compilation that ``event`` ends raised: it added no overload for its
+    argument types (numba's ``Event.is_failed`` reads its flag the wrong way round)."""
+    data = event.data or {}
+    try:
+        return tuple(data["args"]) not in data["dispatcher"].overloads
+    except (KeyError, TypeError, AttributeError):
+        return False
+
+
+@contextmanager
+def compile_clock(show: bool) -> Iterator[CompileClock]:
+    """Time and announce numba's work in this thread while the block runs.
+
+    Parameters
+    ----------
+    show : bool
+        Announce compilations on stderr (they are logged at INFO in any case); :data:`SHOW`
+        forces it.
+    """
+    from numba.core import event
+
+    clock = CompileClock(show or SHOW)
+    outer = getattr(_current, "clock", None)
+
+    class _Lock(event.Listener):  # type: ignore[misc]
+        def on_start(self, ev: Any) -> None:
+            if threading.get_ident() == clock.thread:
+                clock.lock_entered()
+
+        def on_end(self, ev: Any) -> None:
+            if threading.get_ident() == clock.thread:
+                clock.lock_left()
+
+    class _Compile(event.Listener):  # type: ignore[misc]
+        def on_start(self, ev: Any) -> None:
+            if threading.get_ident() == clock.thread:
+                clock.compile_started(_function_name(ev))
+
+        def on_end(self, ev: Any) -> None:
+            if threading.get_ident() == clock.thread:
+                clock.compile_ended(_failed(ev))
+
+    listeners = [("numba:compiler_lock", _Lock()), ("numba:compile", _Compile())]
+    for kind, listener in listeners:
+        event.register(kind, listener)
+    _current.clock = clock
+    try:
+        yield clock
+    finally:
+        for kind, listener in listeners:
+            event.unregister(kind, listener)
+        _current.clock = outer
+        clock.close()
+
+
+@contextmanager
+def compile_notice(label: str) -> Iterator[None]:
+    """Name what compiles inside the block in the announcements of the current clock."""
+    clock = getattr(_current, "clock", None)
+    if clock is None:
+        yield
+        return
+    clock.labels.append(label)
+    try:
+        yield
+    finally:
+        clock.labels.pop()
