@@ -143,10 +143,11 @@ class CompiledB(Kernel):
 
     Examples
     --------
-    The so(n) rigid body :math:`B(W) = -C \circ W`, written once:
+    The so(n) rigid body :math:`B(W) = -C \circ W`, written once (in a module file, write
+    ``@numba.njit(cache=True)``; numba can only cache functions that live in a file):
 
     >>> import numba, numpy as np, isoflow as iso
-    >>> @numba.njit(cache=True)
+    >>> @numba.njit
     ... def rigid_body_B(W, out, C):
     ...     n = W.shape[0]
     ...     for i in range(n):
