@@ -146,3 +146,25 @@ def test_a_function_that_does_not_compile_is_not_reported_as_compiled(
         iso.solve(prob, iso.IsoMP(), alg.random(1), dt=0.1, n_steps=5)
     err = capsys.readouterr().err
     assert "isoflow: compiling broken_field" in err and "compiled broken_field in" not in err
+
+
+def test_a_named_block_is_announced_once_however_many_functions_it_compiles(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from isoflow._compile_clock import compile_clock, compile_notice
+
+    @numba.njit
+    def first(x):  # type: ignore[no-untyped-def]
+        return x + 1
+
+    @numba.njit
+    def second(x):  # type: ignore[no-untyped-def]
+        return x * 2
+
+    with compile_clock(show=True) as clock, compile_notice("the compiled loop for a test"):
+        assert first(1) == 2 and second(2) == 4
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2, lines
+    assert lines[0].startswith("isoflow: compiling the compiled loop for a test (first use")
+    assert lines[1].startswith("isoflow: compiled the compiled loop for a test in ")
+    assert clock.compiled == 1 and clock.seconds > 0

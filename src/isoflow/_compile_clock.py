@@ -14,7 +14,8 @@ to both while a run executes (:func:`isoflow.solve`, a restart):
   look hung. Loading from the cache is quick and is not announced.
 
 :func:`compile_notice` names what compiles inside a block (the time loop's first chunk names
-its compiled loop); a compilation outside any such block is named by its function.
+its compiled loop, which takes several compilations) and announces it once; a compilation
+outside any such block is named by its function.
 
 Compilations in other threads (another run, the writer thread) are neither counted nor
 announced here. This module imports numba only when a clock starts.
@@ -41,6 +42,15 @@ SHOW = False
 _current = threading.local()
 
 
+class _Span:
+    """A block named by :func:`compile_notice`: its compilations are announced as one."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.announced = False
+        self.seconds = 0.0
+
+
 class CompileClock:
     """numba's work in one thread while a run executes (see the module docstring).
 
@@ -51,7 +61,7 @@ class CompileClock:
     seconds : float
         Time spent obtaining machine code (compiling or loading from the cache) so far.
     compiled : int
-        Compilations announced so far (cache misses; nested ones count with the outer one).
+        Compilations announced so far (those of one :func:`compile_notice` block count once).
     """
 
     def __init__(self, show: bool) -> None:
@@ -60,17 +70,30 @@ class CompileClock:
         self.seconds = 0.0
         self.compiled = 0
         self.thread = threading.get_ident()
-        self.labels: list[str] = []
+        self.spans: list[_Span] = []
         self._lock_depth = 0
         self._lock_started = 0.0
         self._compile_depth = 0
         self._compile_started = 0.0
-        self._what = ""
+        self._function = ""
 
     def _say(self, msg: str) -> None:
         log.info(msg)
         if self.show:
             print(f"isoflow: {msg}", file=sys.stderr, flush=True)
+
+    def _announce(self, what: str) -> None:
+        first = self.compiled == 0
+        self.compiled += 1
+        self._say(
+            f"compiling {what}"
+            + (
+                " (first use of this code here; numba's cache keeps what is compiled with "
+                "cache=True for later processes)..."
+                if first
+                else "..."
+            )
+        )
 
     def lock_entered(self) -> None:
         """numba starts to get machine code (a cache load or a compilation)."""
@@ -85,31 +108,34 @@ class CompileClock:
             self.seconds += time.perf_counter() - self._lock_started
 
     def compile_started(self, function: str) -> None:
-        """A compilation starts: announce the outermost one."""
+        """A compilation starts: announce it (in a named block, the block's first one)."""
         self._compile_depth += 1
         if self._compile_depth > 1:
             return
         self._compile_started = time.perf_counter()
-        self._what = self.labels[-1] if self.labels else function
-        first = self.compiled == 0
-        self.compiled += 1
-        self._say(
-            f"compiling {self._what}"
-            + (
-                " (first use of this code here; numba's cache keeps what is compiled with "
-                "cache=True for later processes)..."
-                if first
-                else "..."
-            )
-        )
+        self._function = function
+        span = self.spans[-1] if self.spans else None
+        if span is None:
+            self._announce(function)
+        elif not span.announced:
+            span.announced = True
+            self._announce(span.label)
 
     def compile_ended(self, failed: bool) -> None:
-        """A compilation ends: say how long the outermost one took."""
+        """A compilation ends: say how long it took (in a named block: at the block's end)."""
         self._compile_depth -= 1
-        if self._compile_depth == 0 and not failed:
-            self._say(
-                f"compiled {self._what} in {time.perf_counter() - self._compile_started:.1f} s"
-            )
+        if self._compile_depth > 0:
+            return
+        seconds = time.perf_counter() - self._compile_started
+        if self.spans:
+            self.spans[-1].seconds += seconds
+        elif not failed:
+            self._say(f"compiled {self._function} in {seconds:.1f} s")
+
+    def span_ended(self, span: _Span) -> None:
+        """A named block ends without an error: say how long its compilations took."""
+        if span.announced:
+            self._say(f"compiled {span.label} in {span.seconds:.1f} s")
 
     def close(self) -> None:
         """Count an interval left open by an error (numba ends its events even then)."""
@@ -181,13 +207,16 @@ def compile_clock(show: bool) -> Iterator[CompileClock]:
 
 @contextmanager
 def compile_notice(label: str) -> Iterator[None]:
-    """Name what compiles inside the block in the announcements of the current clock."""
-    clock = getattr(_current, "clock", None)
+    """Announce what compiles inside the block as ``label``, once, with the time it took
+    (in the current clock; nothing without one)."""
+    clock: CompileClock | None = getattr(_current, "clock", None)
     if clock is None:
         yield
         return
-    clock.labels.append(label)
+    span = _Span(label)
+    clock.spans.append(span)
     try:
         yield
     finally:
-        clock.labels.pop()
+        clock.spans.pop()
+    clock.span_ended(span)
