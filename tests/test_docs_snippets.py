@@ -18,6 +18,7 @@ from __future__ import annotations
 import doctest
 import importlib
 import re
+import runpy
 import shutil
 import textwrap
 import traceback
@@ -351,3 +352,10 @@ def test_docstring_examples_run(
     for test in finder.find(mod, module):
         runner.run(test, out=report.append)
     assert runner.failures == 0, "".join(report)
+
+
+def test_the_gallery_shows_no_values_of_expressions() -> None:
+    """sphinx-gallery would print the value of each cell's last expression (``Text(...)`` of a
+    title, a ``Legend``): the examples end their cells with matplotlib calls."""
+    conf = runpy.run_path(str(ROOT / "docs" / "conf.py"))
+    assert conf["sphinx_gallery_conf"]["capture_repr"] == ()
