@@ -191,6 +191,29 @@ class Param:
         """What the model function gets for a :meth:`check`-ed value (a tuple for lists)."""
         return tuple(checked) if self.length is not None else checked
 
+    def kind_text(self) -> str:
+        """The kind as ``isoflow list`` shows it: ``int``, or ``2-vector of int``."""
+        kind = self.kind.__name__
+        return kind if self.length is None else f"{self.length}-vector of {kind}"
+
+    def typed(self, value: Any) -> str:
+        """``value`` as it is typed on the command line: ``16,16``, ``0.5``, ``curve``."""
+        if isinstance(value, list | tuple):
+            return ",".join(self.typed(v) for v in value)
+        if isinstance(value, bool):
+            return "true" if value else "false"
+        if self.kind is int and isinstance(value, int | float) and float(value).is_integer():
+            return str(int(value))
+        if isinstance(value, float):
+            return f"{value:g}"
+        return str(value)
+
+    def describe(self, name: str) -> str:
+        """One line for ``isoflow list``: name, kind, default, help and upper bound."""
+        default = "" if self.default is None else f", default {self.typed(self.default)}"
+        bound = "" if self.high is None else f" [at most {self.typed(self.high)}]"
+        return f"{name} ({self.kind_text()}{default}): {self.help}{bound}"
+
 
 # ---- models ------------------------------------------------------------------------------------
 
@@ -552,7 +575,7 @@ METHODS: dict[str, MethodSpec] = {
         f"isosyrk-{s}": MethodSpec(
             f"isosyrk-{s}",
             _isosyrk(s),
-            f"isospectral symplectic Gauss RK, {s} stages, order {2 * s}",
+            f"isospectral symplectic Gauss RK, {s} stage{'s' if s > 1 else ''}, order {2 * s}",
         )
         for s in (1, 2, 3)
     },
@@ -939,11 +962,7 @@ def describe(kind: str) -> list[tuple[str, str, list[str]]]:
     if kind == "models":
         rows = []
         for spec in MODELS.values():
-            lines = [
-                f"{k} ({p.kind.__name__}, default {p.default!r}): {p.help}"
-                + ("" if p.high is None else f" [at most {p.high:g}]")
-                for k, p in (spec.params or {}).items()
-            ]
+            lines = [p.describe(k) for k, p in (spec.params or {}).items()]
             rows.append((spec.name, spec.description, lines))
         for name, ep in sorted(_entry_points().items()):
             rows.append((name, f"registered by an installed package ({ep.value})", []))
