@@ -108,6 +108,30 @@ def test_B_wrong_shape(W0) -> None:
         _solve(prob, W0)
 
 
+@pytest.mark.parametrize(
+    ("members", "what"),
+    [
+        (2, r"fails on the ensemble \(InvalidBError: B returned shape \(3, 3, 2\)"),
+        (3, r"gives other values for its first member than for that state alone"),  # was silent
+    ],
+)
+def test_B_that_does_not_broadcast_says_what_to_write(members: int, what: str) -> None:
+    alg = iso.algebras.so(3)
+    ensemble = np.stack([alg.random(k) for k in range(members)])
+
+    def B(W):  # W / 2 for one skew state; W.T reverses every axis of a stack
+        return -0.5 * W.T
+
+    prob = iso.IsospectralProblem(B=B, algebra=alg)
+    with pytest.raises(iso.InvalidBError, match=r"B works on one state but " + what) as err:
+        _solve(prob, ensemble)
+    msg = str(err.value)
+    assert "np.swapaxes(W, -1, -2)" in msg and "vectorized=False" in msg and "\n" not in msg
+    per_member = iso.IsospectralProblem(B=B, algebra=alg, vectorized=False)
+    fixed = iso.IsospectralProblem(B=lambda W: -0.5 * np.swapaxes(W, -1, -2), algebra=alg)
+    assert _solve(per_member, ensemble).ys.tobytes() == _solve(fixed, ensemble).ys.tobytes()
+
+
 def test_B_outside_normalizer(W0) -> None:
     prob = iso.IsospectralProblem(B=lambda W: W @ W, algebra=iso.algebras.so(3))  # symmetric
     with pytest.raises(iso.InvalidBError, match=r"not in the normalizer so\(3\).*distance"):
