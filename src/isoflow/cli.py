@@ -748,10 +748,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
-    except (IsoflowError, OSError, ValueError, TypeError) as exc:
+    except (IsoflowError, OSError, ValueError, TypeError, MemoryError) as exc:
         if os.environ.get("ISOFLOW_DEBUG"):
             raise
         msg = " ".join(str(exc).split()) or type(exc).__name__
+        if isinstance(exc, MemoryError):
+            msg = f"out of memory: {msg} (a smaller model, or a machine with more memory)"
         print(f"isoflow: error: {msg}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
