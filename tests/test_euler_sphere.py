@@ -281,6 +281,22 @@ def test_errors_are_typed() -> None:
         iso.models.euler_sphere(N=6, W0=np.eye(6, dtype=complex))
 
 
+def test_an_initial_function_must_be_real_and_finite() -> None:
+    def wave(theta, phi):  # type: ignore[no-untyped-def]
+        return np.exp(1j * phi) * np.sin(theta)  # complex: its real part alone was used
+
+    with pytest.raises(iso.DtypeError, match=r"f returned complex values \(largest imaginary "
+                       r"part 0\.\d+\); a vorticity is real"):  # fmt: skip
+        iso.models.euler_sphere(N=8, initial=wave)
+    with pytest.raises(iso.NonFiniteError, match="f returned non-finite values"):
+        iso.models.euler_sphere(N=8, initial=lambda th, ph: np.where(th > 1, np.inf, 1.0))
+    with pytest.raises(iso.DtypeError, match="f returned <U1 values, not real numbers"):
+        iso.models.euler_sphere(N=8, initial=lambda th, ph: np.full(th.shape, "a"))
+    _, real = iso.models.euler_sphere(N=8, initial=lambda th, ph: np.real(wave(th, ph)))
+    _, zero_imag = iso.models.euler_sphere(N=8, initial=lambda th, ph: np.real(wave(th, ph)) + 0j)
+    assert real.tobytes() == zero_imag.tobytes()
+
+
 @pytest.mark.parametrize(
     ("model", "size", "state_bytes"),
     [

@@ -168,6 +168,12 @@ class CompiledB(Kernel):
                 "CompiledB needs a numba-compiled function: decorate it with "
                 f"@numba.njit(cache=True) (got {type(f).__name__})"
             )
+        if not getattr(f, "targetoptions", {}).get("nopython", True):
+            raise InvalidBError(
+                f"CompiledB needs a nopython function, and {getattr(f, '__name__', 'f')} is "
+                "compiled in object mode (forceobj=True or nopython=False): decorate it with "
+                "@numba.njit(cache=True), or give the problem a Python B instead"
+            )
         if not isinstance(args, tuple):
             raise TypeError(f"CompiledB: args must be a tuple, got {type(args).__name__}")
         self.f = f
