@@ -133,6 +133,25 @@ def test_the_command_line_announces_also_with_quiet(
     assert "isoflow: compiling fresh_field" in capsys.readouterr().err
 
 
+def test_the_command_line_announces_while_its_command_runs(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from isoflow import _compile_clock, _solve, cli
+
+    seen: list[tuple[bool, bool]] = []
+    clock = _solve.compile_clock
+
+    def spy(show: bool):  # type: ignore[no-untyped-def]
+        seen.append((show, _compile_clock.SHOW))
+        return clock(show)
+
+    monkeypatch.setattr(_solve, "compile_clock", spy)
+    args = ["run", "rigid-body", "--n", "3", "--dt", "0.1", "--n-steps", "2", "--quiet"]
+    assert cli.main([*args, "--out", str(tmp_path / "r.h5")]) == 0
+    assert seen == [(False, True)]  # --quiet: no progress bar, compilations still announced
+    assert _compile_clock.SHOW is False  # and only while the command ran
+
+
 def test_a_function_that_does_not_compile_is_not_reported_as_compiled(
     capsys: pytest.CaptureFixture[str],
 ) -> None:

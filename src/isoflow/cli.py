@@ -737,6 +737,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``isoflow`` command; returns the exit status."""
     parser = _build_parser()
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    from . import _compile_clock
+
+    announced = _compile_clock.SHOW  # the commands announce compilations; restored after
     try:
         if not args.computes:
             return int(args.func(args))
@@ -759,6 +762,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("isoflow: interrupted", file=sys.stderr)
         return 130
+    finally:
+        _compile_clock.SHOW = announced
 
 
 if __name__ == "__main__":  # pragma: no cover
