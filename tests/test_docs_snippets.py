@@ -1,7 +1,7 @@
 """Every Python example of the documentation runs as written.
 
 Collected: the ``.. code-block:: python`` blocks and the ``>>>`` doctest blocks of
-``docs/**/*.rst``, the fenced ```` ```python ```` blocks of ``README.md``, and the ``>>>``
+``docs/**/*.rst``, the fenced ``python`` blocks of ``README.md``, and the ``>>>``
 examples in the docstrings of the package's modules. The blocks of one page run in order in one
 namespace (as a reader pastes them into one session), as ``__main__``, in a fresh temporary
 directory, with BLAS on one thread (``tests/conftest.py``); doctest output is compared with
