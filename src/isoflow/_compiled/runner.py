@@ -21,7 +21,6 @@ runs the fused spin-chain sweeps in a ``(3, N)`` layout (:mod:`isoflow._compiled
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -333,7 +332,6 @@ class CompiledRunner(Runner):
             self.failures.step >= 0, self.failures.step + 1, -1
         )
         self.parallel = self.M >= 2 and _threads() > 1 and self._threads_allowed()
-        self.compile_seconds = 0.0
         self._drive: Any = None
         self._user: tuple[int, Array, Array] | None = None
 
@@ -478,21 +476,20 @@ class CompiledRunner(Runner):
 
     def _call(self, make_drive: Any, args: tuple[Any, ...], what: str) -> None:
         """Run the compiled driver on ``args``; the first call gets it from ``make_drive()``
-        and compiles it (timed, with the compile notice), later calls reuse it. A parallel
-        driver hands out its items in pieces of :attr:`_chunk`."""
+        and compiles it (or loads it from numba's cache; a compilation is announced as
+        ``what``), later calls reuse it. A parallel driver hands out its items in pieces of
+        :attr:`_chunk`."""
         import numba
 
         chunk = self._chunk if self.parallel else 0  # 0: numba's static split
         if self._drive is None:
-            from .notice import compile_notice
+            from .._compile_clock import compile_notice
 
-            start = time.perf_counter()
-            with compile_notice(what):
+            with compile_notice(f"the compiled loop for {what}"):
                 drive = make_drive()
                 with numba.parallel_chunksize(chunk):
                     drive(*args)
             self._drive = drive
-            self.compile_seconds = time.perf_counter() - start
         else:
             with numba.parallel_chunksize(chunk):
                 self._drive(*args)
