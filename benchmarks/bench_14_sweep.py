@@ -48,14 +48,15 @@ def _spec(n_steps: int, members: int, tag: float) -> Any:
 def _timed_sweep(client: Any, spec: Any, root: Path, name: str) -> tuple[float, float]:
     """Wall time of the sweep and the sum of its tasks' own times (in the workers)."""
     import isoflow as iso
-    from isoflow.sweep.files import read_json, task_paths
+    from isoflow.sweep.files import read_summary
 
     out = root / name
     t = time.perf_counter()
     res = iso.sweep(spec, out, client=client, progress=False)
     wall = time.perf_counter() - t
     assert res.success and len(res.computed) == TASKS, res
-    inside = sum(read_json(task_paths(out, t.id).json)["task_seconds"] for t in spec.tasks)
+    entries = [{"id": t.id, "members": [m.index for m in t.members]} for t in spec.tasks]
+    inside = sum(read_summary(out, e)["task_seconds"] for e in entries)
     shutil.rmtree(out)
     return wall, inside
 

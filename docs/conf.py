@@ -70,6 +70,9 @@ sphinx_gallery_conf = {
     "download_all_examples": False,
     "remove_config_comments": True,
     "within_subsection_order": "sphinx_gallery.sorting.FileNameSortKey",
+    # the examples print what they show; the value of a cell's last expression (the Text of
+    # fig.suptitle, the Legend of ax.legend) is not output
+    "capture_repr": (),
     "min_reported_time": 1,
     "show_memory": False,
     "plot_gallery": "True",

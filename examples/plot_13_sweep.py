@@ -3,27 +3,18 @@ A sweep on a LocalCluster
 =========================
 
 ``iso.sweep`` runs many members (parameters, seeds or a grid of them) as batched solves on a
-dask.distributed cluster, each task writing its own resumable HDF5 file; ``open_sweep`` reads
-the results back as one xarray Dataset with a ``member`` dimension. This example needs
-``isoflow.sweep`` and its extra (dask, distributed); where they are missing it prints a note
-and stops.
+dask.distributed cluster, each task writing its own resumable HDF5 file;
+``iso.sweep.open_sweep`` reads the results back as one xarray Dataset with a ``member``
+dimension. Sweeps need the extra ``pip install 'isoflow[sweep]'`` (dask, distributed, xarray);
+the user guide's page on sweeps describes the file, the directory, faults and clusters.
 """
 
-import importlib.util
 import tempfile
 
 import numpy as np
 from matplotlib.figure import Figure
 
 import isoflow as iso
-
-
-def available(name):
-    try:
-        return importlib.util.find_spec(name) is not None
-    except ModuleNotFoundError:
-        return False
-
 
 SPEC = {
     "model": "brockett",
@@ -46,13 +37,10 @@ def run_sweep(out):
         Client(cluster) as client,
     ):
         iso.sweep(SPEC, out, client=client, progress=False)
-    open_sweep = getattr(iso.io, "open_sweep", None) or iso.sweep.open_sweep
-    return open_sweep(out).sortby("member")
+    return iso.sweep.open_sweep(out).sortby("member")
 
 
-if not (available("isoflow.sweep") and available("distributed")):
-    print("isoflow.sweep (or dask.distributed) is not available in this installation: skipped.")
-elif __name__ == "__main__":  # the worker processes import this file too; they run nothing
+if __name__ == "__main__":  # the worker processes import this file too; they run nothing
     ds = run_sweep(tempfile.mkdtemp())
     print(ds)
 

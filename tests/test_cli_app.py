@@ -89,6 +89,79 @@ def test_list_shows_the_registry(capsys: pytest.CaptureFixture[str]) -> None:
     assert "rigid-body" in out and "n (int, default 10)" in out and "at most 2048" in out
 
 
+def test_list_shows_parameters_as_they_are_typed(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "shape (2-vector of int, default 16,16): lattice size L1, L2 [at most 3000]" in out
+    assert "field (3-vector of float, default 0,0,0): Zeeman field h" in out
+    assert "N (int, default 100): number of spins [at most 10000000]" in out
+    assert "initial (str, default curve):" in out and "scale (float): norm scale" in out
+    assert "RK, 1 stage, order 2" in out and "RK, 2 stages, order 4" in out
+    assert "default None" not in out and "[16, 16]" not in out and "1e+07" not in out
+
+
+def test_run_help_says_which_model_takes_which_parameter() -> None:
+    run = cli._build_parser()._subparsers._group_actions[0].choices["run"]  # type: ignore[union-attr]
+    group = next(g for g in run._action_groups if g.title == "model parameters")
+    helps = {a.option_strings[0]: a.help for a in group._group_actions}
+    assert helps["--n"] == (
+        "rigid-body: matrix size of so(n) (default 10); brockett: matrix size of herm(n) "
+        "(default 10); toda: number of particles (default 12)"
+    )
+    assert helps["--shape"] == "spin-lattice: lattice size L1, L2 (default 16,16)"
+    flags = {f for spec in registry.MODELS.values() for f in spec.params or {}}
+    assert len(helps) == len(flags) + 1 and "--param" in helps  # every model flag is here
+
+
+@pytest.mark.parametrize("command", ["info", "plot"])
+def test_info_and_plot_help_describe_the_command(command: str) -> None:
+    parser = cli._build_parser()._subparsers._group_actions[0].choices[command]  # type: ignore[union-attr]
+    assert parser.description and len(parser.description) > 100
+
+
+def _columns(lines: list[str]) -> set[int]:
+    """Where the values start in ``  name  value`` lines."""
+    return {len(ln) - len(ln[2:].split("  ", 1)[1].lstrip()) for ln in lines}
+
+
+def test_info_aligns_its_rows_and_suggests_resuming_only_a_resumable_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = str(tmp_path / "toy.h5")
+    args = ["run", "--model", "user_models:toy_rigid_body", "--param", "n=3", "--dt", "0.1",
+            "--n-steps", "20", "--quiet", "--out", out]  # fmt: skip
+    assert cli.main(args) == 0
+    summary = capsys.readouterr().out.splitlines()
+    assert len(_columns(summary[1:])) == 1, summary
+    assert cli.main(["info", out]) == 0
+    shown = capsys.readouterr().out.splitlines()
+    assert any(ln.startswith("  hamiltonian_relative_drift  ") for ln in shown)
+    assert len(_columns(shown[1:])) == 1, shown
+    assert "  model" in shown[1] and shown[1].split()[1:4] == [
+        "user_models:toy_rigid_body", "(not", "built"
+    ]  # fmt: skip
+    assert "resume with" not in "\n".join(shown) and re.search(r"resumable +no$", shown[6])
+
+
+def test_plot_has_no_empty_panel_without_a_hamiltonian(tmp_path: Path) -> None:
+    from isoflow import io, plotting
+
+    out = str(tmp_path / "c.h5")
+    args = ["run", "--model", "user_models:compiled_toy", "--param", "n=4", "--dt", "0.05",
+            "--n-steps", "20", "--quiet", "--out", out]  # fmt: skip
+    assert cli.main(args) == 0
+    run = io.load(out)
+    assert "hamiltonian" not in run.series and "lyapunov" not in run.series
+    fig = plotting.plot_run(run)
+    titles = [ax.get_title() for ax in fig.axes]
+    assert len(fig.axes) == 3 and all(titles) and not any("Hamiltonian" in t for t in titles)
+    toy = str(tmp_path / "toy.h5")
+    assert cli.main(["run", "--model", "user_models:toy_rigid_body", "--dt", "0.1",
+                     "--n-steps", "20", "--quiet", "--out", toy]) == 0  # fmt: skip
+    titles = [ax.get_title() for ax in plotting.plot_run(io.load(toy)).axes]
+    assert len(titles) == 4 and "Hamiltonian variation" in titles
+
+
 def test_parser_names_come_from_the_registry() -> None:
     parser = cli._build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices

@@ -8,6 +8,8 @@ speed of Rossby-Haurwitz waves derived below.
 
 from __future__ import annotations
 
+import importlib
+
 import ducc0
 import numpy as np
 import pytest
@@ -262,6 +264,10 @@ def test_errors_are_typed() -> None:
         iso.models.euler_sphere(N=8, rms=0.0)
     with pytest.raises(iso.ParameterError):
         iso.models.euler_sphere(N=8, seed=1.5)  # type: ignore[arg-type]
+    with pytest.raises(
+        iso.ParameterError, match="euler_sphere: seed must be an integer >= 0, got -1"
+    ):
+        iso.models.euler_sphere(N=8, seed=-1)
     with pytest.raises(iso.ShapeError):
         iso.models.euler_sphere(N=8, initial=np.zeros(7))
     with pytest.raises(iso.ShapeError):
@@ -273,6 +279,66 @@ def test_errors_are_typed() -> None:
         iso.models.euler_sphere(N=5, W0=W)
     with pytest.raises(iso.NotInSpaceError):
         iso.models.euler_sphere(N=6, W0=np.eye(6, dtype=complex))
+
+
+def test_an_initial_function_must_be_real_and_finite() -> None:
+    def wave(theta, phi):  # type: ignore[no-untyped-def]
+        return np.exp(1j * phi) * np.sin(theta)  # complex: its real part alone was used
+
+    with pytest.raises(iso.DtypeError, match=r"f returned complex values \(largest imaginary "
+                       r"part 0\.\d+\); a vorticity is real"):  # fmt: skip
+        iso.models.euler_sphere(N=8, initial=wave)
+    with pytest.raises(iso.NonFiniteError, match="f returned non-finite values"):
+        iso.models.euler_sphere(N=8, initial=lambda th, ph: np.where(th > 1, np.inf, 1.0))
+    with pytest.raises(iso.DtypeError, match="f returned <U1 values, not real numbers"):
+        iso.models.euler_sphere(N=8, initial=lambda th, ph: np.full(th.shape, "a"))
+    _, real = iso.models.euler_sphere(N=8, initial=lambda th, ph: np.real(wave(th, ph)))
+    _, zero_imag = iso.models.euler_sphere(N=8, initial=lambda th, ph: np.real(wave(th, ph)) + 0j)
+    assert real.tobytes() == zero_imag.tobytes()
+
+
+@pytest.mark.parametrize(
+    ("model", "size", "state_bytes"),
+    [
+        ("euler_sphere", {"N": 20000}, 16 * 20000**2),
+        ("rigid_body", {"n": 100000}, 8 * 100000**2),
+        ("brockett", {"n": 20000}, 16 * 20000**2),
+        ("toda", {"n": 100000}, 8 * 100000**2),
+    ],
+)
+def test_a_model_too_large_for_the_memory_is_refused_before_it_allocates(
+    model: str, size: dict[str, int], state_bytes: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import tracemalloc
+
+    from isoflow.models import _checks
+
+    monkeypatch.setattr(_checks, "available_memory", lambda: 8 * 2**30)
+    factory = getattr(iso.models, model)
+    peak = importlib.import_module(factory.__module__)._BUILD_PEAK_STATES
+    ((key, value),) = size.items()
+    need = f"{state_bytes * peak / 2**30:.1f} GiB"
+    tracemalloc.start()
+    try:
+        with pytest.raises(iso.ParameterError) as err:
+            factory(**size)
+        assert tracemalloc.get_traced_memory()[1] < 2**20  # refused before building
+    finally:
+        tracemalloc.stop()
+    assert str(err.value) == (
+        f"{model}: {key} = {value} needs about {need} of memory to build ({peak:g} times the "
+        f"{state_bytes / 2**30:.1f} GiB state), more than the 8.0 GiB available here; choose a "
+        "smaller size"
+    )
+    small = {k: 16 for k in size}
+    assert factory(**small)[1].shape[-1] == 16  # sizes that fit are built
+
+
+def test_the_available_memory_is_known_here() -> None:
+    from isoflow.models._checks import available_memory
+
+    have = available_memory()
+    assert have is not None and 2**20 < have < 2**50
 
 
 def test_condensation_experiment_runs_and_plots() -> None:

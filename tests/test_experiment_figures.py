@@ -63,3 +63,16 @@ def test_a_figure_refuses_another_experiments_result(results) -> None:
         EXPERIMENTS["rigid-body"].figure(results["brockett"])
     with pytest.raises(ValueError, match="no experiment called 'nothing'"):
         iso.plotting.plot_experiment(ExperimentResult("nothing", {}))
+
+
+def test_the_euler_sphere_spectrum_axis_spans_the_data(
+    results: dict[str, ExperimentResult],
+) -> None:
+    import numpy as np
+
+    fig = EXPERIMENTS["euler-sphere"].figure(results["euler-sphere"])
+    ax = next(ax for ax in fig.axes if ax.get_title() == "energy spectrum")
+    drawn = np.concatenate([line.get_ydata() for line in ax.get_lines()])
+    drawn = drawn[np.isfinite(drawn)]
+    low, high = ax.get_ylim()
+    assert low == pytest.approx(drawn.min() / 3) and high == pytest.approx(drawn.max() * 3)

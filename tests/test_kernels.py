@@ -106,3 +106,22 @@ def test_a_kernel_that_is_not_the_problems_B_is_rejected_at_the_start() -> None:
 def test_problem_needs_B_or_kernel() -> None:
     with pytest.raises(TypeError, match="give B, or a kernel"):
         iso.IsospectralProblem(algebra=iso.algebras.so(3))
+
+
+def test_an_object_mode_function_is_refused_with_what_to_write() -> None:
+    import numba
+
+    from isoflow._kernel_fields import field_type
+
+    @numba.jit(forceobj=True)
+    def object_mode_field(W, out, C):  # type: ignore[no-untyped-def]
+        out[:, :] = -C * W
+
+    C = np.ones((3, 3))
+    with pytest.raises(iso.InvalidBError, match=r"CompiledB needs a nopython function, and "
+                       r"object_mode_field is compiled in object mode .*@numba\.njit"):  # fmt: skip
+        iso.CompiledB(object_mode_field, (C,))
+    # the compiled loops' own check, for a dispatcher that says nothing about its mode
+    with pytest.raises(iso.InvalidBError, match=r"object_mode_field compiled in object mode; "
+                       r"compiled loops call only nopython functions"):  # fmt: skip
+        field_type(object_mode_field, (C,), np.float64, np.float64)

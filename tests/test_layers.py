@@ -19,10 +19,8 @@ HEAVY = (
     "distributed",
 )  # fmt: skip
 
-#: Known import edges that close a cycle, each with the reason it is still there.
-#: Deliberate back edges, each imported inside a function only (no import-time cycle):
-#: ``isoflow.io.open_sweep`` is the files layer's entry to the sweep's reader.
-ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = {("isoflow.io", "isoflow.sweep.results")}
+#: Known import edges that close a cycle, each with the reason it is still there (none now).
+ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 
 
 def _loaded_after(code: str) -> list[str]:

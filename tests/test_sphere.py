@@ -485,3 +485,73 @@ def test_errors_are_typed() -> None:
         sphere.from_function(lambda t, p: np.zeros(3), 4)
     with pytest.raises(iso.ParameterError):
         sphere.animate(np.zeros((2, 3)), "movie.avi")
+
+
+_W8 = sphere.random_vorticity(8, seed=2)
+_STATES = np.stack([_W8, _W8])
+_E8 = sphere.energy_spectrum(_W8)
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "message"),
+    [
+        (lambda p: sphere.plot_orthographic(_W8, centers=["north"]), iso.ParameterError,
+         r"plot_orthographic: a centre is \(latitude, longitude\) in degrees, got 'north'"),
+        (lambda p: sphere.plot_orthographic(_W8, centers=[(30,)]), iso.ParameterError,
+         r"a centre is \(latitude, longitude\) in degrees, got \(30,\)"),
+        (lambda p: sphere.plot_orthographic(_W8, centers=[(np.nan, 0)]), iso.ParameterError,
+         r"a finite latitude in \[-90, 90\] and a finite longitude"),
+        (lambda p: sphere.plot_orthographic(_W8, centers=[(120, 0)]), iso.ParameterError,
+         r"a finite latitude in \[-90, 90\]"),
+        (lambda p: sphere.plot_orthographic(_W8, centers=(30, 0)), iso.ParameterError,
+         r"a centre is \(latitude, longitude\) in degrees, got 30"),
+        (lambda p: sphere.plot_orthographic(_W8, resolution=0), iso.ParameterError,
+         r"plot_orthographic: resolution must be >= 3, got 0"),
+        (lambda p: sphere.plot_orthographic(_W8, resolution=-3), iso.ParameterError,
+         r"resolution must be >= 3, got -3"),
+        (lambda p: sphere.plot_orthographic(_W8, resolution=2.5), iso.ParameterError,
+         r"resolution must be an integer, got 2.5"),
+        (lambda p: sphere.plot_map(_W8, ntheta=0), iso.ParameterError,
+         r"draw_map: ntheta must be >= 2, got 0"),
+        (lambda p: sphere.plot_map(_W8, vmax=0.0), iso.ParameterError,
+         r"draw_map: vmax must be a positive finite number, got 0.0"),
+        (lambda p: sphere.plot_map(_W8, vmax=np.nan), iso.ParameterError,
+         r"vmax must be a positive finite number, got nan"),
+        (lambda p: sphere.animate(_STATES, p / "a.gif", fps=0), iso.ParameterError,
+         r"animate: fps must be >= 1, got 0"),
+        (lambda p: sphere.animate(_STATES, p / "a.gif", dpi=0), iso.ParameterError,
+         r"animate: dpi must be a positive finite number, got 0"),
+        (lambda p: sphere.animate(_STATES, p / "a.gif", ts=[0.0, 1.0, 2.0]), iso.ShapeError,
+         r"animate: ts must have shape \(2,\), one per time, got \(3,\)"),
+        (lambda p: sphere.animate(_STATES, p / "a.gif", ts=[0.0, np.inf]), iso.NonFiniteError,
+         r"animate: ts must be finite"),
+        (lambda p: sphere.animate(_STATES, p / "a.gif", kind="orthographic", center=5),
+         iso.ParameterError, r"animate: a centre is \(latitude, longitude\) in degrees, got 5"),
+        (lambda p: sphere.plot_invariants([], energy=[]), iso.ShapeError,
+         r"plot_invariants: ts must have shape \(n_t,\) with n_t >= 1, got \(0,\)"),
+        (lambda p: sphere.plot_invariants([0, 1, 2], energy=[1.0, 2.0]), iso.ShapeError,
+         r"plot_invariants: energy must have shape \(3,\), one per time, got \(2,\)"),
+        (lambda p: sphere.plot_invariants([0, 1, 2], casimirs=np.ones((2, 3))), iso.ShapeError,
+         r"plot_invariants: casimirs must have shape \(3, K\), one row per time, got \(2, 3\)"),
+        (lambda p: sphere.plot_invariants(np.ones((2, 2)), energy=[1.0, 2.0]), iso.ShapeError,
+         r"plot_invariants: ts must have shape \(n_t,\)"),
+        (lambda p: sphere.plot_energy_spectrum({"a": np.stack([_E8, _E8])}), iso.ShapeError,
+         r"spectrum 'a': give E_l for l = 1..lmax as a non-empty real vector, got shape \(2, 7\)"),
+        (lambda p: sphere.plot_energy_spectrum({}), iso.ShapeError,
+         r"draw_energy_spectrum: give at least one spectrum"),
+    ],
+)  # fmt: skip
+def test_figure_arguments_are_checked_with_one_line_errors(call, error, message, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(error, match=message) as err:
+        call(tmp_path)
+    assert "\n" not in str(err.value)
+    assert list(tmp_path.iterdir()) == []  # no movie started
+
+
+def test_the_spectrum_axis_spans_the_values_drawn() -> None:
+    ax = Figure().subplots()
+    E = np.array([1.0, 0.1, 1e-3, 1e-17, 0.0])  # 1e-17: rounding of a degree the data lack
+    sphere.figures.draw_energy_spectrum(ax, {"E": E})
+    drawn = ax.get_lines()[0].get_ydata()
+    assert np.array_equal(np.isnan(drawn), [False, False, False, True, True])
+    assert ax.get_ylim() == pytest.approx((1e-3 / 3, 3.0))

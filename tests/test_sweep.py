@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -16,9 +18,19 @@ import numpy as np
 import pytest
 
 import isoflow as iso
-from isoflow.sweep import SweepError, member_run, open_sweep, read_spec, status
+from isoflow.cli import main
+from isoflow.sweep import (
+    SweepError,
+    build_member,
+    member_run,
+    open_sweep,
+    read_spec,
+    run_task,
+    status,
+)
 from isoflow.sweep import results as sweep_results
-from isoflow.sweep.files import task_paths
+from isoflow.sweep.files import seal, task_paths, write_manifest
+from isoflow.sweep.task import task_layouts
 
 pytest.importorskip("distributed")
 pytest.importorskip("xarray")
@@ -184,8 +196,18 @@ BASE = {"model": "rigid-body", "dt": 0.1, "n_steps": 10, "members": [{"n": 4}]}
         ({"method": "isomq"}, "unknown method 'isomq'"),
         ({"perturb": -1.0}, "perturb must be a positive number"),
         ({"members_per_task": 0}, "members_per_task must be an integer >= 1"),
+        # too many members, counted before a single one is listed
+        ({"grid": {k: {"start": 0, "stop": 1000} for k in "abc"}},
+         r"the sweep has 1,000,000,000 members \(1 \[\[members\]\] row x 1000 values of a x "
+         r"1000 values of b x 1000 values of c\), more than the limit of 100,000: split it"),
+        ({"grid": {"n": {"start": 0.0, "stop": 1.0, "num": 10**12}}},
+         "1,000,000,000,000 members"),
+        ({"grid": {"n": {"start": 0, "stop": 10**18}}}, "1,000,000,000,000,000,000 members"),
+        ({"members": [{"n": 4}, {"n": 5}], "grid": {"seed": {"start": 0, "stop": 50_001}}},
+         r"100,002 members \(2 \[\[members\]\] rows x 50001 values of seed\)"),
+        ({"n_steps": 2**30, "dt": 1e-9}, "would save 1,073,741,825 states"),
     ],
-)
+)  # fmt: skip
 def test_bad_sweeps_are_one_line_typed_errors(change: dict, pattern: str) -> None:
     table = {k: v for k, v in (BASE | change).items() if v is not None}
     with pytest.raises(SweepError, match=pattern) as info:
@@ -199,16 +221,14 @@ def test_bad_sweeps_are_one_line_typed_errors(change: dict, pattern: str) -> Non
     ['model = "rigid-body"\ndt = 0.1\nn_steps = 10\n[[members]]\nn = 4\nseed = 2\n',
      'model = "rigid-body"\ndt = 0.1\n[[members]\n'],
 )  # fmt: skip
-def test_cli_bad_sweep_file_exits_1_with_one_line(tmp_path: Path, text: str) -> None:
+def test_cli_bad_sweep_file_exits_1_with_one_line(
+    tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     f = tmp_path / "bad.toml"
     f.write_text(text)
-    out = subprocess.run(
-        [sys.executable, "-m", "isoflow.cli", "sweep", str(f), "--out", str(tmp_path / "o")],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    assert out.returncode == 1
-    lines = out.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("isoflow: error: "), out.stderr
+    assert main(["sweep", str(f), "--out", str(tmp_path / "o")]) == 1
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"isoflow: error: {f}: "), lines
     assert not (tmp_path / "o").exists()
 
 
@@ -222,6 +242,384 @@ def test_iso_sweep_is_callable_after_importing_a_submodule() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=120)  # fmt: skip
     assert "the sweep has no members" in out.stdout
+
+
+def test_a_factory_with_its_own_seed_is_swept_over_it() -> None:
+    spec = read_spec({"model": "user_models:toy_rigid_body", "dt": 0.1, "n_steps": 4,
+                      "grid": {"seed": [0, 1, 2]}})  # fmt: skip
+    assert [m.params["seed"] for m in spec.members] == [0, 1, 2]
+    assert [m.seed for m in spec.members] == [None] * 3  # no perturbation: none to seed
+    states = [build_member(spec, m)[1] for m in spec.members]
+    assert not np.array_equal(states[0], states[1]) and not np.array_equal(states[1], states[2])
+    assert len(spec.tasks) == 3  # a seed of a factory may change B: not initial data by default
+    own = read_spec({"model": "user_models:toy_rigid_body", "dt": 0.1, "n_steps": 4,
+                     "initial": ["seed"], "grid": {"seed": [0, 1, 2]}})  # fmt: skip
+    assert [len(t.members) for t in own.tasks] == [3]
+
+
+def test_without_the_extra_a_sweep_says_how_to_install_it(tmp_path: Path) -> None:
+    f = tmp_path / "s.toml"
+    f.write_text('model = "rigid-body"\ndt = 0.1\nn_steps = 4\n[[members]]\nn = 3\n')
+    code = f"""
+import contextlib, io, json, sys
+for name in ("dask", "distributed", "xarray"):
+    sys.modules[name] = None  # not installed
+import isoflow as iso
+from isoflow.cli import main
+out = {{}}
+for what, call in (("sweep", lambda: iso.sweep({str(f)!r}, {str(tmp_path / "o")!r})),
+                   ("open", lambda: iso.sweep.open_sweep({str(tmp_path)!r}))):
+    try:
+        call()
+    except iso.sweep.MissingExtraError as exc:
+        out[what] = [str(exc), isinstance(exc, ImportError), isinstance(exc, iso.IsoflowError)]
+err = io.StringIO()
+with contextlib.redirect_stderr(err):
+    out["cli"] = [main(["sweep", {str(f)!r}, "--out", {str(tmp_path / "o")!r}]), err.getvalue()]
+print(json.dumps(out))
+"""
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True)  # fmt: skip
+    out = json.loads(run.stdout)
+    hint = "pip install 'isoflow[sweep]'"
+    for what in ("sweep", "open"):
+        text, is_import_error, is_ours = out[what]
+        assert text.endswith(hint) and "dask does not import" in text and "\n" not in text
+        assert is_import_error and is_ours
+    status_, err = out["cli"]
+    assert status_ == 1 and err.count("\n") == 1 and err.startswith("isoflow: error: sweeps need")
+    assert err.strip().endswith(hint)
+    assert not (tmp_path / "o").exists()
+
+
+def test_more_workers_than_cores_are_capped_with_a_warning(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from isoflow.cli import _warnings_as_lines
+    from isoflow.sweep.run import _capped_workers
+    from isoflow.threads import available_cores
+
+    cores = available_cores()
+    with pytest.warns(RuntimeWarning, match=f"workers = 999 is more than the {cores} cores"):
+        assert _capped_workers(999) == cores
+    assert _capped_workers(None) == cores and _capped_workers(1) == 1
+    with _warnings_as_lines():  # as isoflow sweep shows it
+        assert _capped_workers(999) == cores
+    err = capsys.readouterr().err
+    assert err.startswith(f"isoflow: warning: workers = 999 is more than the {cores} cores")
+    assert err.count("\n") == 1
+
+
+# ---- sweep directories (tasks run in this process, no cluster) ---------------------------------
+
+#: Three one-member tasks of a small perturbed rigid body.
+SMALL = {
+    "model": "rigid-body",
+    "params": {"n": 4},
+    "dt": 0.05,
+    "n_steps": 20,
+    "save_every": 5,
+    "perturb": 1e-3,
+    "members_per_task": 1,
+    "grid": {"seed": {"start": 0, "stop": 3}},
+}
+
+
+def _prepared(spec, directory: Path) -> Path:
+    """A sweep directory as a sweep writes it before any task runs."""
+    write_manifest(directory, spec, task_layouts(spec))
+    return directory
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory):
+    """``(spec, directory)`` of SMALL with every task run here (no cluster)."""
+    spec = read_spec(SMALL)
+    d = _prepared(spec, tmp_path_factory.mktemp("finished"))
+    for t in spec.tasks:
+        run_task(spec, t.id, d)
+    return spec, d
+
+
+@pytest.fixture
+def copy(finished, tmp_path: Path):
+    """A copy of the finished sweep directory to damage."""
+    spec, d = finished
+    shutil.copytree(d, tmp_path / "s")
+    return spec, tmp_path / "s"
+
+
+def _values(directory: Path) -> dict[str, np.ndarray]:
+    import dask
+
+    with dask.config.set(scheduler="sync"):
+        ds = open_sweep(directory).sortby("member").compute()
+    return {name: ds[name].values for name in ds.data_vars}
+
+
+def _edit(fn):
+    def edit(text: str) -> str:
+        data = json.loads(text)
+        fn(data)
+        return json.dumps(data)
+
+    return edit
+
+
+def _resealed(fn):
+    """An edit after which the summary's checksum is recomputed (a deliberate forgery)."""
+    return _edit(lambda data: (fn(data), data.update(checksum=seal(data)["checksum"])))
+
+
+MANIFEST_CASES = {
+    "empty": (lambda t: "", "empty$"),
+    "truncated": (lambda t: t[: len(t) // 2], r"not valid JSON \(truncated\?\)$"),
+    "{}": (lambda t: "{}", "not an isoflow sweep manifest$"),
+    "a list": (lambda t: "[1]", "a JSON list, not a table$"),
+    "old version": (_edit(lambda d: d.update(format_version=1)), "format version 1, not 2"),
+    "no members": (_edit(lambda d: d.pop("members")), "'members' is not a list$"),
+    "no tasks": (_edit(lambda d: d.pop("tasks")), "'tasks' is not a non-empty list$"),
+    "no run": (_edit(lambda d: d.pop("run")), "'run' is not a table$"),
+    "no layouts": (_edit(lambda d: d.pop("layouts")), "no 'layouts'$"),
+    "n_steps a string": (_edit(lambda d: d["run"].update(n_steps="20")), "'n_steps' is not an"),
+    "saves 1e18 states": (
+        _edit(lambda d: d["run"].update(n_steps=10**18, save_every=1)),
+        "'run' saves more than 16777216 states",
+    ),
+    "member out of range": (
+        _edit(lambda d: d["tasks"][0].update(members=[7])),
+        "lists members that the manifest does not have",
+    ),
+    "member twice": (
+        _edit(lambda d: d["tasks"][1].update(members=[0])),
+        "repeats members of another task",
+    ),
+    "a member in no task": (_edit(lambda d: d["tasks"].pop()), "some members belong to no task"),
+    "task id a path": (
+        _edit(lambda d: d["tasks"][0].update(id="../../x")),
+        "task 0 has id '../../x'",
+    ),
+    "member without params": (
+        _edit(lambda d: d["members"][0].pop("params")),
+        "member 0 has no 'params' table",
+    ),
+    "member index": (_edit(lambda d: d["members"][1].update(index=0)), "member 1 has index 0"),
+    "huge layout": (
+        _edit(lambda d: d["layouts"][0].update(state_shape=[10**9, 10**9])),
+        r"state_shape: shape \(1000000000, 1000000000\) is too large",
+    ),
+    "layout dtype": (
+        _edit(lambda d: d["layouts"][0].update(state_dtype="object")),
+        "dtype object is not numeric",
+    ),
+    "layout index": (_edit(lambda d: d["tasks"][0].update(layout=3)), "has layout 3"),
+    "errors a list": (_edit(lambda d: d.update(errors=[])), "'errors' is not a table"),
+    "perturb": (_edit(lambda d: d.update(perturb="big")), "'perturb' is not > 0"),
+}
+
+
+@pytest.mark.parametrize("case", list(MANIFEST_CASES))
+def test_a_malformed_manifest_is_one_line_naming_it(
+    copy, case: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _spec, d = copy
+    edit, pattern = MANIFEST_CASES[case]
+    path = d / "sweep.json"
+    path.write_text(edit(path.read_text()))
+    for read in (status, open_sweep):
+        with pytest.raises(SweepError) as info:
+            read(d)
+        assert str(info.value).startswith(f"{path}: ") and "\n" not in str(info.value)
+        assert re.search(pattern, str(info.value)), str(info.value)
+    assert main(["info", str(d)]) == 1
+    assert capsys.readouterr().err == f"isoflow: error: {info.value}\n"
+
+
+SUMMARY_CASES = {
+    "empty": (lambda t: "", "empty"),
+    "truncated": (lambda t: t[: len(t) // 2], r"not valid JSON \(truncated\?\)"),
+    "{}": (lambda t: "{}", "its checksum does not match"),
+    "a list": (lambda t: "[]", "a JSON list, not a table"),
+    "edited": (_edit(lambda d: d.update(status=["failed"])), "its checksum does not match"),
+    "no checksum": (_edit(lambda d: d.pop("checksum")), "its checksum does not match"),
+    "another task's": (_resealed(lambda d: d.update(id="0" * 20)), "the summary of task '0000"),
+    "other members": (_resealed(lambda d: d.update(members=[2])), "members are not the task's"),
+    "short status": (_resealed(lambda d: d.update(status=[])), "'status' is not a status list"),
+    "no drifts": (_resealed(lambda d: d.pop("drifts")), "no 'drifts'"),
+    "drift text": (
+        _resealed(lambda d: d["drifts"].update(casimir_drift=["x"])),
+        "drift 'casimir_drift' is not a list of 1 numbers",
+    ),
+    "huge state": (_resealed(lambda d: d.update(state_shape=[2**40])), "is too large"),
+    "no file hash": (_resealed(lambda d: d.pop("file_sha256")), "no 'file_sha256'"),
+}
+
+
+@pytest.mark.parametrize("case", list(SUMMARY_CASES))
+def test_a_malformed_summary_marks_its_task_damaged_and_is_redone(
+    finished, copy, case: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec, d = copy
+    edit, pattern = SUMMARY_CASES[case]
+    task = spec.tasks[0]
+    path = task_paths(d, task.id).json
+    path.write_text(edit(path.read_text()))
+    damaged = status(d)["damaged"]
+    assert list(damaged) == [task.id] and damaged[task.id].startswith(f"{path}: ")
+    assert re.search(pattern, damaged[task.id]) and "run the sweep again" in damaged[task.id]
+    ds = open_sweep(d)
+    assert ds.status.sel(member=0) == "pending" and ds.message.sel(member=0) == damaged[task.id]
+    assert main(["info", str(d)]) == 0
+    assert re.search(
+        rf"  task {task.id} +damaged: {re.escape(str(path))}: ", capsys.readouterr().out
+    )
+    run_task(spec, task.id, d)  # what the sweep's worker does: it runs the task again
+    assert status(d, verify=True)["done"] == len(spec.tasks)
+    assert all(np.array_equal(a, b) for a, b in zip(
+        _values(d).values(), _values(finished[1]).values(), strict=True))  # fmt: skip
+
+
+@pytest.mark.parametrize("damage", ["deleted", "truncated", "scrambled", "another task's"])
+def test_a_damaged_result_file_marks_its_task_damaged_and_is_redone(copy, damage: str) -> None:
+    spec, d = copy
+    task, other = spec.tasks[0], spec.tasks[1]
+    h5 = task_paths(d, task.id).h5
+    if damage == "deleted":
+        h5.unlink()
+    elif damage == "truncated":
+        _truncate(h5)
+    elif damage == "scrambled":
+        _scramble(h5)
+    else:
+        h5.write_bytes(task_paths(d, other.id).h5.read_bytes())
+    shallow, deep = status(d)["damaged"], status(d, verify=True)["damaged"]
+    message = deep[task.id]
+    assert list(deep) == [task.id] and message.startswith(f"{task_paths(d, task.id).json}: ")
+    expected = {"deleted": f"its result file {h5.name} is missing",
+                "truncated": f"its result file {h5.name} changed size"}.get(
+                    damage, f"its result file {h5.name} changed")  # fmt: skip
+    assert f": {expected};" in message
+    if damage in ("deleted", "truncated"):
+        assert shallow == deep  # a size or a missing file is seen without reading the file
+    run_task(spec, task.id, d)
+    assert status(d, verify=True)["damaged"] == {}
+    _assert_members_are_serial_runs(spec, d)
+
+
+def test_a_partial_task_of_another_task_s_file_starts_again(copy) -> None:
+    spec, d = copy
+    task, other = spec.tasks[0], spec.tasks[1]
+    p = task_paths(d, task.id)
+    p.json.unlink()
+    p.h5.write_bytes(task_paths(d, other.id).h5.read_bytes())
+    run_task(spec, task.id, d)
+    assert "is not this task's result file; starting again" in p.log.read_text()
+    assert iso.io.info(p.h5)["config"]["sweep"] == {"task": task.id, "digest": task.digest}
+    _assert_members_are_serial_runs(spec, d)
+
+
+def test_before_any_task_finished_results_are_nan_of_the_right_shape(finished, tmp_path) -> None:
+    spec, done = finished
+    d = _prepared(spec, tmp_path)
+    empty, full = open_sweep(d), open_sweep(done)
+    drifts = {k for k in full.data_vars if k.endswith("_drift") or k == "max_distance"}
+    assert drifts and set(empty.data_vars) == set(full.data_vars) - drifts  # drifts: when done
+    for name in ("y", "y_final", "casimirs", "hamiltonian"):
+        assert empty[name].shape == full[name].shape and empty[name].dtype == full[name].dtype
+        assert np.isnan(_local(empty, name)).all()
+    assert set(empty.status.values) == {"pending"}
+
+
+def test_members_of_different_shapes_are_opened_one_shape_at_a_time(tmp_path: Path) -> None:
+    spec = read_spec({"model": "rigid-body", "dt": 0.1, "n_steps": 4,
+                      "members": [{"n": 3}, {"n": 4}]})  # fmt: skip
+    d = _prepared(spec, tmp_path)
+    with pytest.raises(SweepError, match=r"different shapes \(\(3, 3\) \(.*\); \(4, 4\) .*where="):
+        open_sweep(d)
+    run_task(spec, spec.tasks[1].id, d)
+    assert open_sweep(d, where={"n": 3}).y.shape == (1, 5, 3, 3)
+    four = open_sweep(d, where={"n": 4})
+    assert np.array_equal(_local(four, "y")[0], member_run(spec, 1).ys)
+
+
+def test_a_task_whose_members_all_failed_is_frozen_at_its_last_good_state(tmp_path) -> None:
+    spec = read_spec({"model": "brockett", "params": {"n": 4}, "dt": 0.05, "n_steps": 40,
+                      "save_every": 4, "members": [{"seed": 1, "scale": 1e6}]})  # fmt: skip
+    d = _prepared(spec, tmp_path)
+    summary = run_task(spec, spec.tasks[0].id, d)
+    assert summary["status"] == ["failed"]
+    ds = open_sweep(d)
+    assert ds.y.shape == (1, 11, 4, 4)
+    _assert_members_are_serial_runs(spec, d)
+
+
+def test_a_sweep_task_file_points_at_its_sweep(finished, capsys) -> None:
+    spec, d = finished
+    h5 = task_paths(d, spec.tasks[0].id).h5
+    assert main(["info", str(h5)]) == 0
+    out = capsys.readouterr().out
+    assert f"task {spec.tasks[0].id} of the sweep in {d}: run the sweep again to resume it" in out
+    assert "(not built in" not in out and "resume with isoflow run --resume" not in out
+    assert main(["run", "--resume", str(h5)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"isoflow: error: {h5} is task {spec.tasks[0].id} of the sweep in")
+    assert err.count("\n") == 1
+
+
+def test_a_full_disk_at_the_start_names_the_manifest_and_leaves_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "s.toml"
+    f.write_text('model = "rigid-body"\ndt = 0.1\nn_steps = 4\n[[members]]\nn = 3\n')
+    d = tmp_path / "out"
+
+    def full(fd: int) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", full)
+    assert main(["sweep", str(f), "--out", str(d)]) == 1
+    assert capsys.readouterr().err == (
+        f"isoflow: error: {d / 'sweep.json'}: cannot write: No space left on device\n"
+    )
+    assert sorted(p.name for p in d.rglob("*")) == ["tasks"]  # no temporary file left
+
+
+@pytest.mark.parametrize(
+    ("reply", "pattern"),
+    [
+        (None, r"no dask scheduler answered at tcp://127\.0\.0\.1:\d+ within 0\.5 s"),
+        (b"HTTP/1.1 502 Bad Gateway\r\n\r\n" * 4,
+         r"tcp://127\.0\.0\.1:\d+ does not answer as a dask scheduler \(MemoryError"),
+    ],
+    ids=["silent", "foreign protocol"],
+)  # fmt: skip
+def test_a_scheduler_address_that_is_not_a_scheduler_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], reply: bytes | None, pattern: str
+) -> None:
+    """A server that accepts the connection and never speaks dask (as an HTTP server waits for
+    a request), or answers in another protocol (as a proxy)."""
+    import socketserver
+
+    class Peer(socketserver.BaseRequestHandler):
+        def handle(self) -> None:
+            if reply is not None:
+                self.request.sendall(reply)
+            while self.request.recv(1 << 16):  # keep the connection until the client gives up
+                pass
+
+    f = tmp_path / "s.toml"
+    f.write_text('model = "rigid-body"\ndt = 0.1\nn_steps = 4\n[[members]]\nn = 3\n')
+    with socketserver.ThreadingTCPServer(("127.0.0.1", 0), Peer) as server:
+        server.daemon_threads = True
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        address = f"tcp://127.0.0.1:{server.server_address[1]}"
+        args = ["--out", str(tmp_path / "o"), "--scheduler", address, "--connect-timeout", "0.5",
+                "--quiet"]  # fmt: skip
+        assert main(["sweep", str(f), *args]) == 1
+        server.shutdown()
+    err = capsys.readouterr().err
+    assert err.startswith("isoflow: error: ") and err.count("\n") == 1
+    assert re.search(pattern, err), err
 
 
 # ---- running -----------------------------------------------------------------------------------
@@ -260,9 +658,9 @@ def test_open_sweep_is_lazy_and_reads_each_file_once(
     calls: list[str] = []
     real = sweep_results.read_task
 
-    def counting(path):
+    def counting(path, *args):
         calls.append(Path(path).name)
-        return real(path)
+        return real(path, *args)
 
     monkeypatch.setattr(sweep_results, "read_task", counting)
     ds = open_sweep(tmp_path)
@@ -276,21 +674,23 @@ def test_open_sweep_is_lazy_and_reads_each_file_once(
     sel = open_sweep(tmp_path, where={"seed": 4})
     with dask.config.set(scheduler="sync"):
         assert sel.y.shape[0] == 1 and np.array_equal(sel.y.values[0], loaded.y.sel(member=4))
-        # the files layer's entry to the same reader
-        assert iso.io.open_sweep(tmp_path, where={"seed": 4}).identical(sel)
+    assert not hasattr(iso.io, "open_sweep")  # one name for the reader: iso.sweep.open_sweep
 
 
-def test_failing_member_and_raising_task_are_reported_others_finish(client, tmp_path: Path) -> None:
-    table = {
-        "model": "brockett",
-        "params": {"n": 4},
-        "dt": 0.05,
-        "n_steps": 40,
-        "members": [{"seed": 0}, {"seed": 1, "scale": 1e6}, {"seed": 2}],
-    }
-    spec = read_spec(table)
-    res = iso.sweep(spec, tmp_path / "fail", client=client, progress=False)
-    assert res.failed_members == [1] and not res.errors
+def test_failing_member_and_raising_task_are_reported_others_finish(
+    client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "fail.toml"
+    f.write_text(
+        'model = "brockett"\ndt = 0.05\nn_steps = 40\n[params]\nn = 4\n[[members]]\nseed = 0\n'
+        "[[members]]\nseed = 1\nscale = 1e6\n[[members]]\nseed = 2\n"
+    )
+    spec = read_spec(f)
+    # the command line on the running scheduler: a failed member makes the exit status 1
+    args = ["--out", str(tmp_path / "fail"), "--scheduler", client.scheduler.address, "--quiet"]
+    assert main(["sweep", str(f), *args]) == 1
+    out = capsys.readouterr().out
+    assert "1 member(s) failed" in out and "failed members: 1 (isoflow info" in out
     ds = open_sweep(tmp_path / "fail")
     st = dict(zip(ds.member.values.tolist(), ds.status.values.tolist(), strict=True))
     assert st == {0: "finished", 1: "failed", 2: "finished"}
@@ -312,28 +712,83 @@ def test_failing_member_and_raising_task_are_reported_others_finish(client, tmp_
     assert np.isnan(_local(ds, "y")[0]).all() and np.isfinite(_local(ds, "y")[1]).all()
     assert "ParameterError" in task_paths(tmp_path / "raise", bad.id).log.read_text()
     assert status(tmp_path / "raise")["errors"] == {bad.id: res.errors[bad.id]}
-    out = subprocess.run([sys.executable, "-m", "isoflow.cli", "info", str(tmp_path / "fail")],
-                         capture_output=True, text=True, check=True, timeout=120)  # fmt: skip
-    assert re.search(r"members +3 in 1 task\n", out.stdout) and "member 1" in out.stdout
-    assert "failed at step 0: diverged" in out.stdout
-    out = subprocess.run(
-        [sys.executable, "-m", "isoflow.cli", "info", "--json", str(tmp_path / "raise")],
-        capture_output=True, text=True, check=True, timeout=120,
-    )  # fmt: skip
-    assert json.loads(out.stdout)["errors"] == res.errors
+    assert main(["info", str(tmp_path / "fail")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"members +3 in 1 task\n", out) and "member 1" in out
+    assert "failed at step 0: diverged" in out
+    assert main(["info", "--json", str(tmp_path / "raise")]) == 0
+    assert json.loads(capsys.readouterr().out)["errors"] == res.errors
 
 
-def test_rerun_redoes_only_deleted_summaries_and_files(client, tmp_path: Path) -> None:
-    spec = read_spec(RIGID)
+def _scramble(path: Path) -> None:
+    """Change bytes in the middle of a file, keeping its size."""
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 2
+    data[mid : mid + 64] = bytes(b ^ 0x5A for b in data[mid : mid + 64])
+    path.write_bytes(bytes(data))
+
+
+def _truncate(path: Path) -> None:
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def test_a_rerun_redoes_every_task_whose_files_do_not_hold(client, tmp_path: Path) -> None:
+    spec = read_spec(RIGID | {"members_per_task": 1, "grid": {"seed": {"start": 0, "stop": 6}}})
     iso.sweep(spec, tmp_path, client=client, progress=False)
-    a, b = spec.tasks[0].id, spec.tasks[1].id
-    task_paths(tmp_path, a).json.unlink()
-    task_paths(tmp_path, b).json.unlink()
-    task_paths(tmp_path, b).h5.unlink()
+    t = [task_paths(tmp_path, task.id) for task in spec.tasks]
+    ids = [task.id for task in spec.tasks]
+    t[0].json.unlink()  # the summary deleted: resumed from the complete file
+    t[1].h5.unlink()  # the result file deleted, its summary left
+    _truncate(t[2].h5)
+    _scramble(t[3].h5)  # same size: only the recorded SHA-256 tells
+    t[4].h5.write_bytes(t[5].h5.read_bytes())  # another task's file under this task's name
+    t[4].json.unlink()
+    forged = json.loads(t[5].json.read_text())
+    forged["status"] = ["failed"]
+    t[5].json.write_text(json.dumps(forged))
     res = iso.sweep(spec, tmp_path, client=client, progress=False)
-    assert sorted(res.computed) == sorted([a, b]) and res.skipped == []
-    assert "resumed" in task_paths(tmp_path, a).log.read_text()
+    assert res.skipped == [] and sorted(res.computed) == sorted(ids) and res.success
+    assert sorted(res.redone) == sorted([ids[1], ids[2], ids[3], ids[5]])
+    assert "result file" in res.redone[ids[1]] and "is missing" in res.redone[ids[1]]
+    assert "changed size" in res.redone[ids[2]]
+    assert res.redone[ids[3]].endswith(f"its result file {ids[3]}.h5 changed")
+    assert "checksum does not match" in res.redone[ids[5]]
+    assert "resumed" in t[0].log.read_text()
+    assert "is not this task's result file; starting again" in t[4].log.read_text()
     _assert_members_are_serial_runs(spec, tmp_path)
+
+
+def test_tasks_are_submitted_lazily_and_progress_is_printed(
+    client, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """At most the in-flight bound of tasks is ever waiting, each carrying its own members."""
+    from isoflow.sweep import run as sweep_run
+
+    class Watching:
+        def __init__(self) -> None:
+            self.futures: list = []
+            self.most = 0
+            self.members: list[int] = []
+
+        def nthreads(self) -> dict:
+            return client.nthreads()
+
+        def submit(self, fn, spec, *args, **kwargs):
+            self.members.append(len(spec.members))
+            self.most = max(self.most, 1 + sum(not f.done() for f in self.futures))
+            fut = client.submit(fn, spec, *args, **kwargs)
+            self.futures.append(fut)
+            return fut
+
+    monkeypatch.setattr(sweep_run, "_in_flight", lambda c: 2)
+    spec = read_spec(RIGID | {"members_per_task": 1, "n_steps": 40})
+    watching = Watching()
+    res = iso.sweep(spec, tmp_path, client=watching, progress=True)
+    assert res.success and len(res.computed) == len(spec.tasks) == 5
+    assert watching.members == [1] * 5 and watching.most == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == f"{tmp_path}: 5 members in 5 tasks"
+    assert err[-1] == "tasks done 5/5, members failed 0"
 
 
 # ---- killing -----------------------------------------------------------------------------------

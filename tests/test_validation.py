@@ -108,6 +108,30 @@ def test_B_wrong_shape(W0) -> None:
         _solve(prob, W0)
 
 
+@pytest.mark.parametrize(
+    ("members", "what"),
+    [
+        (2, r"fails on the ensemble \(InvalidBError: B returned shape \(3, 3, 2\)"),
+        (3, r"gives other values for its first member than for that state alone"),  # was silent
+    ],
+)
+def test_B_that_does_not_broadcast_says_what_to_write(members: int, what: str) -> None:
+    alg = iso.algebras.so(3)
+    ensemble = np.stack([alg.random(k) for k in range(members)])
+
+    def B(W):  # W / 2 for one skew state; W.T reverses every axis of a stack
+        return -0.5 * W.T
+
+    prob = iso.IsospectralProblem(B=B, algebra=alg)
+    with pytest.raises(iso.InvalidBError, match=r"B works on one state but " + what) as err:
+        _solve(prob, ensemble)
+    msg = str(err.value)
+    assert "np.swapaxes(W, -1, -2)" in msg and "vectorized=False" in msg and "\n" not in msg
+    per_member = iso.IsospectralProblem(B=B, algebra=alg, vectorized=False)
+    fixed = iso.IsospectralProblem(B=lambda W: -0.5 * np.swapaxes(W, -1, -2), algebra=alg)
+    assert _solve(per_member, ensemble).ys.tobytes() == _solve(fixed, ensemble).ys.tobytes()
+
+
 def test_B_outside_normalizer(W0) -> None:
     prob = iso.IsospectralProblem(B=lambda W: W @ W, algebra=iso.algebras.so(3))  # symmetric
     with pytest.raises(iso.InvalidBError, match=r"not in the normalizer so\(3\).*distance"):
@@ -240,3 +264,29 @@ def test_hamiltonian_returning_nonsense_is_named(W0) -> None:
     )
     with pytest.raises(iso.InvalidBError, match="hamiltonian returned non-numeric"):
         iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=2)
+
+
+@pytest.mark.parametrize(
+    ("make", "what"),
+    [
+        (lambda seed: iso.algebras.so(3).random(seed), "so(3).random: seed"),
+        (lambda seed: iso.models.brockett(n=3, seed=seed), "brockett: seed"),
+        (lambda seed: iso.models.toda(n=3, seed=seed), "toda: seed"),
+        (lambda seed: iso.models.heisenberg_chain(N=4, initial="random", seed=seed),
+         "heisenberg_chain: seed"),
+        (lambda seed: iso.models.spin_lattice(shape=(3, 3), seed=seed), "spin_lattice: seed"),
+        (lambda seed: iso.sphere.random_coefficients(3, seed=seed), "random_coefficients: seed"),
+    ],
+)  # fmt: skip
+@pytest.mark.parametrize("seed", [-1, 1.5, "1", True, [1, -2]])
+def test_bad_seeds_are_parameter_errors(make, what: str, seed) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(iso.ParameterError, match=rf"^{re.escape(what)} must be an integer >= 0"):
+        make(seed)
+
+
+def test_a_generator_gives_the_numbers_of_its_seed() -> None:
+    alg = iso.algebras.so(4)
+    assert alg.random(np.random.default_rng(7)).tobytes() == alg.random(7).tobytes()
+    _, W7 = iso.models.brockett(n=4, seed=7)
+    _, Wg = iso.models.brockett(n=4, seed=np.random.default_rng(7))
+    assert W7.tobytes() == Wg.tobytes()

@@ -75,13 +75,16 @@ def _run(serial: Any, parallel: Any, flat: NDArray[Any]) -> NDArray[np.float64]:
 
     import numba
 
+    from ._compile_clock import compile_notice
+
     out = np.empty(flat.shape[:2], dtype=np.float64)
-    if (
-        flat.shape[0] >= PARALLEL_MIN
-        and numba.get_num_threads() > 1
-        and (threading.current_thread() is threading.main_thread())
-    ):
-        parallel(flat, out)
-    elif flat.shape[0]:
-        serial(flat, out)
+    with compile_notice("the eigenvalue routine of the Casimir diagnostics"):
+        if (
+            flat.shape[0] >= PARALLEL_MIN
+            and numba.get_num_threads() > 1
+            and (threading.current_thread() is threading.main_thread())
+        ):
+            parallel(flat, out)
+        elif flat.shape[0]:
+            serial(flat, out)
     return out

@@ -48,15 +48,22 @@ def field_type(f: Any, args: tuple[Any, ...], dtype: Any, out_dtype: Any) -> Any
     out_t = types.Array(numba.from_dtype(np.dtype(out_dtype)), 2, "C")
     args_t = numba.typeof(args)
     sig = types.void(W_t, out_t, *args_t.types)
+    if sig.args in f.overloads:  # compiled earlier: skip numba's compiler lock
+        return types.FunctionType(sig)
+    name = getattr(f, "__name__", "f")
     try:
         f.compile(sig)
     except Exception as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        name = getattr(f, "__name__", "f")
         raise InvalidBError(
             f"the kernel function {name} does not compile for f(W, out, *args) with W: "
             f"{W_t}, out: {out_t}, args: {args_t}: {first}"
         ) from exc
+    if f.overloads[sig.args].objectmode:  # compiled code cannot call it: it has no C entry
+        raise InvalidBError(
+            f"the kernel function {name} compiled in object mode; compiled loops call only "
+            "nopython functions: decorate it with @numba.njit(cache=True)"
+        )
     return types.FunctionType(sig)
 
 
@@ -80,7 +87,11 @@ def apply_field(f: Any, args: tuple[Any, ...], W: Any, out: Any) -> None:
     )
     run = _APPLY.get(sig)
     if run is None:
-        run = _APPLY[sig] = numba.njit(sig, cache=True)(_apply)
+        from ._compile_clock import compile_notice
+
+        name = getattr(f, "__name__", "f")
+        with compile_notice(f"the wrapper that calls {name} from Python"):
+            run = _APPLY[sig] = numba.njit(sig, cache=True)(_apply)
     run(f, args, np.ascontiguousarray(W), out)
 
 

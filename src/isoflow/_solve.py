@@ -30,6 +30,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._compile_clock import CompileClock, compile_clock
 from ._errors import (
     ConvergenceError,
     IsoflowError,
@@ -99,9 +100,11 @@ class SolveStats:
     residual_max : float
         Largest final nonlinear residual of an accepted step.
     wall_time : float
-        Seconds spent in the loop (compilation included).
+        Seconds of the call: validation, compilation and the loop.
     compile_time : float
-        Seconds of the first compiled chunk when it compiled (or loaded) the loops, else 0.
+        Seconds of it that numba spent compiling or loading machine code from its cache (your
+        function, the wrapper that calls it from Python, the compiled loops); about 0 when
+        everything was compiled earlier in the process.
     runner : str
         What ran the steps: ``"NumPy"`` or ``"compiled, <layout>"``.
     """
@@ -447,6 +450,8 @@ def solve(
         Compute :class:`~isoflow.diagnostics.Diagnostics` on the saved states.
     progress : bool or None
         Progress bar (tqdm). ``None``: only when stderr is a terminal, after one second.
+        A run that compiles (the first with a kernel on a machine) says so on stderr, what it
+        compiles and how long it took, unless ``progress=False``.
     throw : bool
         If a step fails, raise :class:`ConvergenceError` (default; after writing what was
         computed) or return the solution with ``success=False``.
@@ -471,12 +476,13 @@ def solve(
     _check_objects(problem, method, writer)
     _check_save_every(save_every)
     dt_, n = time_grid(t0, t1, dt, n_steps)
-    W = _check_state(problem, y0, "y0")
-    return _run(
-        problem, method, RunState(0, W, method.init(problem, W, dt_)),
-        t0=float(t0), dt=dt_, n=n, save_every=int(save_every), diagnostics=diagnostics,
-        progress=progress, throw=throw, writer=writer, fresh=True,
-    )  # fmt: skip
+    with compile_clock(show=progress is not False) as clock:
+        W = _check_state(problem, y0, "y0")
+        return _run(
+            problem, method, RunState(0, W, method.init(problem, W, dt_)),
+            t0=float(t0), dt=dt_, n=n, save_every=int(save_every), diagnostics=diagnostics,
+            progress=progress, throw=throw, writer=writer, fresh=True, clock=clock,
+        )  # fmt: skip
 
 
 def _check_save_every(save_every: Any) -> None:
@@ -546,15 +552,16 @@ def continue_run(
     IsoflowError
         The state or the time grid do not describe a valid run.
     """
-    dt_, n, st = check_restart(
-        problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
-        writer=writer,
-    )  # fmt: skip
-    return _run(
-        problem, method, st, t0=float(t0), dt=dt_, n=n, save_every=int(save_every),
-        diagnostics=True, progress=progress, throw=throw, writer=writer, fresh=False,
-        accumulator=accumulator,
-    )  # fmt: skip
+    with compile_clock(show=progress is not False) as clock:
+        dt_, n, st = check_restart(
+            problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
+            writer=writer,
+        )  # fmt: skip
+        return _run(
+            problem, method, st, t0=float(t0), dt=dt_, n=n, save_every=int(save_every),
+            diagnostics=True, progress=progress, throw=throw, writer=writer, fresh=False,
+            accumulator=accumulator, clock=clock,
+        )  # fmt: skip
 
 
 class _MemoryWriter:
@@ -795,10 +802,12 @@ def _run(
     throw: bool,
     writer: StreamWriter | None,
     fresh: bool,
+    clock: CompileClock,
     accumulator: DiagnosticsAccumulator | None = None,
 ) -> Solution:
     """The loop (see the module docstring). ``fresh`` runs open the writer and write the
-    initial state; a restart continues a writer holding the rows up to ``state.step``."""
+    initial state; a restart continues a writer holding the rows up to ``state.step``.
+    ``clock`` has timed the run's validation and times its compilations."""
     from tqdm.auto import tqdm
 
     alg = problem.algebra
@@ -816,7 +825,6 @@ def _run(
         accumulator.set_first_state(W)
     runner = _runner_for(problem, method, state, dt)
     k0 = runner.k
-    start = time.perf_counter()
     compute_series = diagnostics or not memory
     sink = _Sink(
         out_writer, accumulator, compute_series,
@@ -955,8 +963,8 @@ def _run(
     finally:
         bar.close()
         sink.shutdown()
-        wall = time.perf_counter() - start
-        stats = _stats(runner, k0, wall)
+        wall = time.perf_counter() - clock.started
+        stats = _stats(runner, k0, wall, clock.seconds)
         try:
             out_writer.close(
                 {
@@ -1039,7 +1047,7 @@ def _convergence_error(message: str, runner: Runner, t0: float, dt: float) -> Ex
     )
 
 
-def _stats(runner: Runner, k0: int, wall: float) -> SolveStats:
+def _stats(runner: Runner, k0: int, wall: float, compile_time: float) -> SolveStats:
     fails = runner.failures
     taken = runner.k - k0
     member_steps = 0
@@ -1055,6 +1063,6 @@ def _stats(runner: Runner, k0: int, wall: float) -> SolveStats:
         iterations_max=int(runner.iterations_max),
         residual_max=float(runner.residual_max),
         wall_time=wall,
-        compile_time=float(getattr(runner, "compile_seconds", 0.0)),
+        compile_time=float(compile_time),
         runner=runner.label,
     )

@@ -30,7 +30,9 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -85,14 +87,23 @@ def _anderson(text: str) -> int:
     return value
 
 
-def _model_param_flags() -> dict[str, str]:
-    """Command-line flag -> model parameter name, for every built-in model's parameters."""
-    flags: dict[str, str] = {}
+def _model_param_flags() -> dict[str, tuple[str, list[tuple[str, registry.Param]]]]:
+    """Command-line flag -> (model parameter name, the built-in models that have it)."""
+    flags: dict[str, tuple[str, list[tuple[str, registry.Param]]]] = {}
     for spec in registry.MODELS.values():
-        for name in spec.params or {}:
+        for name, param in (spec.params or {}).items():
             flag = "--vortex-config" if name == "config" else f"--{name.replace('_', '-')}"
-            flags[flag] = name
+            flags.setdefault(flag, (name, []))[1].append((spec.name, param))
     return flags
+
+
+def _model_param_help(users: list[tuple[str, registry.Param]]) -> str:
+    """The help of a model-parameter flag: what it means for each model that has it."""
+    parts = []
+    for model, p in users:
+        default = "" if p.default is None else f" (default {p.typed(p.default)})"
+        parts.append(f"{model}: {p.help}{default}")
+    return "; ".join(parts).replace("%", "%%")
 
 
 #: Options of ``run`` that describe a new run (not taken by ``--resume``).
@@ -184,11 +195,16 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--save-every", type=_positive_int, dest="save_every", help="save every k steps (1)"
     )
-    for flag, name in _model_param_flags().items():
-        run.add_argument(
-            flag, dest=f"param_{name}", metavar="VALUE", help=f"model parameter {name}"
+    params = run.add_argument_group(
+        "model parameters",
+        "each flag sets a parameter of the built-in models its help names (isoflow list "
+        "models); --param sets any parameter, also of your own model",
+    )
+    for flag, (name, users) in _model_param_flags().items():
+        params.add_argument(
+            flag, dest=f"param_{name}", metavar="VALUE", help=_model_param_help(users)
         )
-    run.add_argument(
+    params.add_argument(
         "--param",
         action="append",
         default=[],
@@ -207,17 +223,37 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_run, computes=True)
 
-    info = sub.add_parser("info", help="describe a result file: parameters and invariant drifts")
+    info = sub.add_parser(
+        "info",
+        help="describe a result file: parameters and invariant drifts",
+        description=(
+            "Describe an isoflow result file: the model and its parameters, the method, the "
+            "time grid, how far the run got and whether it can be resumed (isoflow run "
+            "--resume FILE), and the drift of every invariant over the saved states. On a "
+            "sweep directory: its tasks, failed members and worst drifts."
+        ),
+    )
     info.add_argument("file", help="an isoflow result file (HDF5) or a sweep directory")
     info.add_argument("--json", action="store_true", help="print JSON")
     info.add_argument(
-        "--verify", action="store_true", help="also check every saved state's checksum"
+        "--verify",
+        action="store_true",
+        help="also check every saved state's checksum (a sweep: every task file's SHA-256)",
     )
     info.set_defaults(func=_info, computes=False)
 
     _add_sweep_parser(sub)
 
-    plot = sub.add_parser("plot", help="plot invariants and states from a result file")
+    plot = sub.add_parser(
+        "plot",
+        help="plot invariants and states from a result file",
+        description=(
+            "Draw a result file: the variation of the Casimirs, of the Hamiltonian (or the "
+            "Lyapunov function; no panel when the problem has neither), of the problem's "
+            "invariants (or the distance to the space), and up to six state components that "
+            "move, against time. Writes PNG, PDF or SVG by the suffix of --out."
+        ),
+    )
     plot.add_argument("file", help="an isoflow result file (HDF5)")
     plot.add_argument("--out", required=True, help="image file (.png, .pdf, .svg)")
     plot.add_argument("--force", action="store_true", help="replace an existing --out file")
@@ -278,32 +314,40 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _announce_compiles() -> None:
-    """Say on stderr when a run compiles its loops, and how long that took."""
-    from ._compiled import notice
+    """Say on stderr when a run compiles, also in runs without a progress bar (``--quiet``)."""
+    from . import _compile_clock
 
-    notice.SHOW = True
+    _compile_clock.SHOW = True
 
 
 def _progress(args: argparse.Namespace) -> bool | None:
     return False if args.quiet else None
 
 
+def _table(rows: Sequence[tuple[str, str]]) -> list[str]:
+    """``name  value`` lines, indented two spaces, the values aligned after the longest name."""
+    width = max((len(name) for name, _ in rows), default=0)
+    return [f"  {name:<{width}}  {value}" for name, value in rows]
+
+
 def _summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
     d = sol.diagnostics.summary() if sol.diagnostics is not None else {}
     st = sol.stats
-    lines = [
-        title,
-        f"  {'steps':<24} {st.n_steps} of {sol.n_steps}",
-        f"  {'wall time':<24} {st.wall_time:.2f} s"
-        + (f" (compiling {st.compile_time:.1f} s)" if st.compile_time > 0.5 else ""),
-        f"  {'runner':<24} {st.runner}",
-        f"  {'iterations per step':<24} mean {st.iterations_mean:.2f}, max {st.iterations_max}",
-        *(f"  {k:<24} {v:.3e}" for k, v in d.items()),
-        f"  {'status':<24} {sol.message}",
+    rows = [
+        ("steps", f"{st.n_steps} of {sol.n_steps}"),
+        (
+            "wall time",
+            f"{st.wall_time:.2f} s"
+            + (f" (compiling {st.compile_time:.1f} s)" if st.compile_time > 0.5 else ""),
+        ),
+        ("runner", st.runner),
+        ("iterations per step", f"mean {st.iterations_mean:.2f}, max {st.iterations_max}"),
+        *((k, f"{v:.3e}") for k, v in d.items()),
+        ("status", sol.message),
     ]
     if path is not None:
-        lines.append(f"  {'file':<24} {path}")
-    return lines
+        rows.append(("file", path))
+    return [title, *_table(rows)]
 
 
 # ---- demo --------------------------------------------------------------------------------------
@@ -437,6 +481,9 @@ def _resume(args: argparse.Namespace) -> int:
         "chunk_rows": args.chunk_rows,
         "flush_seconds": args.flush_seconds,
     }
+    sweep_note = _sweep_task_note(args.resume, io.info(args.resume)["config"])
+    if sweep_note is not None:
+        raise UserError(f"{args.resume} is {sweep_note}")
     name = _model_name(args)
     if name is None:
         if args.param:
@@ -490,34 +537,56 @@ def _info(args: argparse.Namespace) -> int:
         print(json.dumps(data, indent=2))
         return 0
     cfg, meta, run_info = data["config"], data["meta"], data["run_info"]
-    state = f"{data['state']}: {data['state_message']}".rstrip(": ")
+    sweep_note = _sweep_task_note(args.file, cfg)
+    message = data["state_message"]
+    if sweep_note is not None:  # resumed by its sweep, not by isoflow run
+        message = message.split("; resume with isoflow run --resume")[0]
+    state = f"{data['state']}: {message}".rstrip(": ")
     model = str(cfg.get("model", "(not registered)"))
-    if "model" in cfg and model not in registry.MODELS:
-        model += f" (not built in: resume with --model {model})"
-    lines = [
-        f"{data['path']}: isoflow result file (written by isoflow {data['isoflow_version']}, "
-        f"{data['created']})",
-        f"  {'model':<24} {model} " + json.dumps(cfg.get("params", {})),
-        f"  {'method':<24} {meta.get('method')} (solver {cfg.get('solver') or 'none'})",
-        f"  {'algebra':<24} {meta.get('algebra')}, state shape {tuple(meta.get('state_shape'))}",
-        f"  {'time grid':<24} t0 = {meta.get('t0'):g}, dt = {meta.get('dt'):g}, "
-        f"{meta.get('n_steps')} steps, save every {meta.get('save_every')}",
-        f"  {'state':<24} {state}",
-        f"  {'resumable':<24} {'yes' if data['resumable'] else 'no'}"
-        + (f" (writer: {data['writer']})" if data["writer"] else ""),
-        f"  {'format version':<24} {data['format_version']}"
-        + (", every saved state verified" if data["verified"] else ""),
-        f"  {'steps done':<24} {data['step']}",
-        f"  {'saved states':<24} {data['n_saved']} (last t = {data['t_last']})",
+    if "model" in cfg and model not in registry.MODELS and sweep_note is None:
+        model += " (not built in" + (
+            f": resume with --model {model})" if data["resumable"] else ")"
+        )
+    rows = [
+        ("model", f"{model} " + json.dumps(cfg.get("params", {}))),
+        ("method", f"{meta.get('method')} (solver {cfg.get('solver') or 'none'})"),
+        ("algebra", f"{meta.get('algebra')}, state shape {tuple(meta.get('state_shape'))}"),
+        (
+            "time grid",
+            f"t0 = {meta.get('t0'):g}, dt = {meta.get('dt'):g}, {meta.get('n_steps')} steps, "
+            f"save every {meta.get('save_every')}",
+        ),
+        ("state", state),
+        (
+            "resumable",
+            ("yes" if data["resumable"] else "no")
+            + (f" (writer: {data['writer']})" if data["writer"] else ""),
+        ),
+        (
+            "format version",
+            f"{data['format_version']}"
+            + (", every saved state verified" if data["verified"] else ""),
+        ),
+        ("steps done", f"{data['step']}"),
+        ("saved states", f"{data['n_saved']} (last t = {data['t_last']})"),
     ]
     if run_info is not None:
         st = run_info.get("stats", {})
-        lines.append(
-            f"  {'wall time':<24} {st.get('wall_time', float('nan')):.2f} s "
-            f"(iterations mean {st.get('iterations_mean', float('nan')):.2f})"
+        rows.append(
+            (
+                "wall time",
+                f"{st.get('wall_time', float('nan')):.2f} s "
+                f"(iterations mean {st.get('iterations_mean', float('nan')):.2f})",
+            )
         )
-    lines += [f"  {k:<24} {v:.3e}" for k, v in data["drifts"].items()]
-    print("\n".join(lines))
+    rows += [(k, f"{v:.3e}") for k, v in data["drifts"].items()]
+    if sweep_note is not None:
+        rows.append(("sweep", sweep_note))
+    head = (
+        f"{data['path']}: isoflow result file (written by isoflow {data['isoflow_version']}, "
+        f"{data['created']})"
+    )
+    print("\n".join([head, *_table(rows)]))
     return 0
 
 
@@ -530,68 +599,125 @@ def _add_sweep_parser(sub: Any) -> None:
         help="run a sweep (sweep.toml: a model, a method, a table of members) on dask",
         description=(
             "Run the members of a sweep file as batched ensembles in dask workers, each task "
-            "streamed to DIR/tasks/<id>.h5; run it again to resume. Needs isoflow[sweep]."
+            "streamed to DIR/tasks/<id>.h5; run it again to resume. Needs isoflow[sweep]. "
+            "Exit status 0: every member finished; 1: a member failed, a task raised, or an "
+            "error (one line); 2: a bad command line."
         ),
     )
-    sw.add_argument("file", help="the sweep file (TOML; see the isoflow.sweep docstring)")
+    sw.add_argument("file", help="the sweep file (TOML; see the user guide's page on sweeps)")
     sw.add_argument("--out", metavar="DIR", help="the sweep directory (default: the file's out)")
     where = sw.add_mutually_exclusive_group()
     where.add_argument(
-        "--workers", type=_positive_int, metavar="K", help="local worker processes (default: cores)"
+        "--workers",
+        type=_positive_int,
+        metavar="K",
+        help="local worker processes (default and most: the cores available)",
     )
     where.add_argument("--scheduler", metavar="ADDR", help="a running dask scheduler to use")
     sw.add_argument(
+        "--connect-timeout",
+        type=_positive_float,
+        default=30.0,
+        metavar="SECONDS",
+        help="how long to wait for --scheduler to answer (default 30 s)",
+    )
+    sw.add_argument(
         "--retries", type=int, default=2, metavar="R", help="worker deaths a task survives (2)"
     )
-    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.add_argument("--quiet", action="store_true", help="no progress")
     sw.set_defaults(func=_sweep, computes=False)
+
+
+@contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """Show warnings as one ``isoflow: warning: ...`` line each on stderr."""
+
+    def show(message: Any, category: Any, *args: Any, **kwargs: Any) -> None:
+        print(f"isoflow: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _sweep(args: argparse.Namespace) -> int:
     from .sweep import read_spec, sweep
+    from .sweep.spec import require_extra
 
+    require_extra("dask", "distributed", "xarray")
     spec = read_spec(args.file)
-    result = sweep(
-        spec,
-        args.out,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        retries=args.retries,
-        progress=not args.quiet,
-    )
+    with _warnings_as_lines():
+        result = sweep(
+            spec,
+            args.out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            retries=args.retries,
+            connect_timeout=args.connect_timeout,
+            progress=not args.quiet,
+        )
     print(result)
+    for tid, msg in result.redone.items():
+        print(f"  task {tid} redone: {msg}")
     for tid, msg in result.errors.items():
         print(f"  task {tid} raised: {msg}")
     if result.failed_members:
-        print(f"  failed members: {', '.join(map(str, result.failed_members))} (isoflow info DIR)")
-    return 1 if result.errors else 0
+        shown = ", ".join(map(str, result.failed_members[:20]))
+        more = len(result.failed_members) - 20
+        shown += f" and {more} more" if more > 0 else ""
+        print(f"  failed members: {shown} (isoflow info {result.path})")
+    return 0 if result.success else 1
 
 
 def _info_sweep(args: argparse.Namespace) -> int:
     from .sweep import status
 
-    data = status(args.file)
+    data = status(args.file, verify=args.verify)
     if args.json:
         print(json.dumps(data, indent=2))
         return 0
     run = data["run"]
-    lines = [
-        f"{data['path']}: isoflow sweep, model {data['model']}, method {run.get('method')}",
-        f"  {'time grid':<24} t0 = {run['t0']:g}, dt = {run['dt']:g}, {run['n_steps']} steps, "
-        f"save every {run['save_every']}",
-        f"  {'members':<24} {data['members']} in {data['tasks']} task"
-        + ("" if data["tasks"] == 1 else "s")
-        + ("" if data["perturb"] is None else f" (perturb {data['perturb']:g})"),
-        f"  {'tasks':<24} {data['done']} done, {data['partial']} partial, "
-        f"{data['pending']} not started",
+    rows = [
+        (
+            "time grid",
+            f"t0 = {run['t0']:g}, dt = {run['dt']:g}, {run['n_steps']} steps, "
+            f"save every {run['save_every']}",
+        ),
+        (
+            "members",
+            f"{data['members']} in {data['tasks']} task"
+            + ("" if data["tasks"] == 1 else "s")
+            + ("" if data["perturb"] is None else f" (perturb {data['perturb']:g})"),
+        ),
+        (
+            "tasks",
+            f"{data['done']} done, {data['partial']} partial, {data['pending']} not started"
+            + (f", {len(data['damaged'])} damaged" if data["damaged"] else "")
+            + (", every result file verified" if args.verify else ""),
+        ),
     ]
-    for tid, msg in data["errors"].items():
-        lines.append(f"  {'task ' + tid:<24} raised: {msg}")
-    for i, f in data["failed_members"].items():
-        lines.append(f"  {'member ' + i:<24} failed at step {f['step']}: {f['message']}")
-    lines += [f"  {k:<24} {v:.3e} (worst finished member)" for k, v in data["drifts"].items()]
-    print("\n".join(lines))
+    rows += [(f"task {tid}", f"damaged: {msg}") for tid, msg in data["damaged"].items()]
+    rows += [(f"task {tid}", f"raised: {msg}") for tid, msg in data["errors"].items()]
+    rows += [
+        (f"member {i}", f"failed at step {f['step']}: {f['message']}")
+        for i, f in data["failed_members"].items()
+    ]
+    rows += [(k, f"{v:.3e} (worst finished member)") for k, v in data["drifts"].items()]
+    head = f"{data['path']}: isoflow sweep, model {data['model']}, method {run.get('method')}"
+    print("\n".join([head, *_table(rows)]))
     return 0
+
+
+def _sweep_task_note(path: str, config: dict[str, Any]) -> str | None:
+    """For a sweep's task file: how to continue it (running its sweep again), else ``None``."""
+    mark = config.get("sweep")
+    if not isinstance(mark, dict):
+        return None
+    directory = Path(path).resolve().parent.parent
+    return (
+        f"task {mark.get('task')} of the sweep in {directory}: run the sweep again to resume "
+        f"it (isoflow sweep SWEEP.toml --out {directory}), not isoflow run --resume"
+    )
 
 
 def _plot(args: argparse.Namespace) -> int:
@@ -681,6 +807,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``isoflow`` command; returns the exit status."""
     parser = _build_parser()
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    from . import _compile_clock
+
+    announced = _compile_clock.SHOW  # the commands announce compilations; restored after
     try:
         if not args.computes:
             return int(args.func(args))
@@ -692,15 +821,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
-    except (IsoflowError, OSError, ValueError, TypeError) as exc:
+    except (IsoflowError, OSError, ValueError, TypeError, MemoryError) as exc:
         if os.environ.get("ISOFLOW_DEBUG"):
             raise
         msg = " ".join(str(exc).split()) or type(exc).__name__
+        if isinstance(exc, MemoryError):
+            msg = f"out of memory: {msg} (a smaller model, or a machine with more memory)"
         print(f"isoflow: error: {msg}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("isoflow: interrupted", file=sys.stderr)
         return 130
+    finally:
+        _compile_clock.SHOW = announced
 
 
 if __name__ == "__main__":  # pragma: no cover

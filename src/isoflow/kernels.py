@@ -143,10 +143,11 @@ class CompiledB(Kernel):
 
     Examples
     --------
-    The so(n) rigid body :math:`B(W) = -C \circ W`, written once:
+    The so(n) rigid body :math:`B(W) = -C \circ W`, written once (in a module file, write
+    ``@numba.njit(cache=True)``; numba can only cache functions that live in a file):
 
     >>> import numba, numpy as np, isoflow as iso
-    >>> @numba.njit(cache=True)
+    >>> @numba.njit
     ... def rigid_body_B(W, out, C):
     ...     n = W.shape[0]
     ...     for i in range(n):
@@ -166,6 +167,12 @@ class CompiledB(Kernel):
             raise TypeError(
                 "CompiledB needs a numba-compiled function: decorate it with "
                 f"@numba.njit(cache=True) (got {type(f).__name__})"
+            )
+        if not getattr(f, "targetoptions", {}).get("nopython", True):
+            raise InvalidBError(
+                f"CompiledB needs a nopython function, and {getattr(f, '__name__', 'f')} is "
+                "compiled in object mode (forceobj=True or nopython=False): decorate it with "
+                "@numba.njit(cache=True), or give the problem a Python B instead"
             )
         if not isinstance(args, tuple):
             raise TypeError(f"CompiledB: args must be a tuple, got {type(args).__name__}")

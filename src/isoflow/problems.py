@@ -18,6 +18,11 @@ __all__ = ["IsospectralProblem"]
 Array = NDArray[Any]
 
 
+def _first_line(exc: Exception) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 @dataclass(frozen=True)
 class IsospectralProblem:
     r"""The isospectral flow :math:`\dot W = [B(W), W]`, ``W`` in ``V``, ``B(W)`` in ``N(V)``.
@@ -152,10 +157,13 @@ class IsospectralProblem:
         norm_alg = alg.normalizer
         try:
             out = self.evaluate_B(W)
-        except InvalidBError:
+        except InvalidBError as exc:
+            self._check_broadcasting(W, exc)
             raise
         except Exception as exc:  # re-raise user errors with context, keep the cause
+            self._check_broadcasting(W, exc)
             raise InvalidBError(f"B raised {type(exc).__name__}: {exc}") from exc
+        self._check_broadcasting(W, None, out)
         if not np.all(np.isfinite(out)):
             raise InvalidBError("B returned non-finite values (NaN or Inf)")
         outc = out.astype(norm_alg.dtype, copy=False)
@@ -177,6 +185,41 @@ class IsospectralProblem:
                 f"W' = [B(W), W] would leave {alg.name}"
             )
         return outc
+
+    def _check_broadcasting(
+        self, W: Array, failure: Exception | None, out: Array | None = None
+    ) -> None:
+        """On an ensemble, compare ``B`` of the first member alone with what ``B`` of the
+        ensemble did (``failure``: it raised, or ``out``: its values for that member).
+
+        Raises
+        ------
+        InvalidBError
+            ``B`` works on one state but fails or gives other values on the ensemble: it
+            does not broadcast over leading axes (``W.T`` reverses *all* axes of a stack).
+        """
+        alg = self.algebra
+        if not self.vectorized or not alg.batch_shape(W):
+            return
+        first = W.reshape(-1, *alg.shape)[0]
+        try:
+            alone = np.asarray(self.evaluate_B(first))
+        except Exception:
+            return  # B fails on one state too: its own error says why
+        if failure is None:
+            assert out is not None
+            got = out.reshape(-1, *alone.shape)[0]
+            scale = max(1.0, float(np.max(np.abs(alone))))
+            if float(np.max(np.abs(got - alone))) <= 1e-10 * scale:
+                return
+            what = "gives other values for its first member than for that state alone"
+        else:
+            what = f"fails on the ensemble ({type(failure).__name__}: {_first_line(failure)})"
+        raise InvalidBError(
+            f"B works on one state but {what}: on an ensemble of shape {W.shape} it must act "
+            "on the last two axes (write np.swapaxes(W, -1, -2) or W.mT, not W.T, and @ or "
+            "np.einsum with '...'), or give vectorized=False to call it member by member"
+        ) from failure
 
     # ---- constructors -------------------------------------------------------------------
     @classmethod

@@ -40,6 +40,7 @@ import keyword
 import math
 import re
 import tomllib
+import traceback
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -169,8 +170,21 @@ class Param:
     def parse(self, text: str, what: str) -> Any:
         """The value of a command-line word ``text`` (then :meth:`check`-ed)."""
         if self.length is not None:
-            words = text.strip().removeprefix("[").removesuffix("]").split(",")
-            return self.check([self._word(w.strip()) for w in words], what)
+            body = text.strip()
+            if body.startswith("[") or body.endswith("]"):
+                body = body.removeprefix("[").removesuffix("]")
+                if not (text.strip().startswith("[") and text.strip().endswith("]")):
+                    body = ""  # unbalanced brackets
+            words = [w.strip() for w in body.split(",")]
+            if "" in words:
+                example = self.typed(
+                    self.default if self.default is not None else [self.kind(1)] * self.length
+                )
+                raise ConfigError(
+                    f"{what} must be a list of {self.length} {self.kind.__name__} values "
+                    f"written like {example}, got {text!r}"
+                )
+            return self.check([self._word(w) for w in words], what)
         return self.check(self._word(text), what)
 
     def _word(self, text: str) -> Any:
@@ -190,6 +204,29 @@ class Param:
     def value(self, checked: Any) -> Any:
         """What the model function gets for a :meth:`check`-ed value (a tuple for lists)."""
         return tuple(checked) if self.length is not None else checked
+
+    def kind_text(self) -> str:
+        """The kind as ``isoflow list`` shows it: ``int``, or ``2-vector of int``."""
+        kind = self.kind.__name__
+        return kind if self.length is None else f"{self.length}-vector of {kind}"
+
+    def typed(self, value: Any) -> str:
+        """``value`` as it is typed on the command line: ``16,16``, ``0.5``, ``curve``."""
+        if isinstance(value, list | tuple):
+            return ",".join(self.typed(v) for v in value)
+        if isinstance(value, bool):
+            return "true" if value else "false"
+        if self.kind is int and isinstance(value, int | float) and float(value).is_integer():
+            return str(int(value))
+        if isinstance(value, float):
+            return f"{value:g}"
+        return str(value)
+
+    def describe(self, name: str) -> str:
+        """One line for ``isoflow list``: name, kind, default, help and upper bound."""
+        default = "" if self.default is None else f", default {self.typed(self.default)}"
+        bound = "" if self.high is None else f" [at most {self.typed(self.high)}]"
+        return f"{name} ({self.kind_text()}{default}): {self.help}{bound}"
 
 
 # ---- models ------------------------------------------------------------------------------------
@@ -235,18 +272,35 @@ class ModelSpec:
         if not isinstance(self.factory, str):
             return self.factory
         module, _, attr = self.factory.partition(":")
-        return _resolve(importlib.import_module(module), attr, self.factory)
+        if self.builtin:
+            return _resolve(importlib.import_module(module), attr, self.factory)
+        return _resolve(_import_module(module, self.name), attr, self.factory)
 
     def make(self, params: Mapping[str, Any]) -> tuple[IsospectralProblem, Any]:
-        """``(problem, y0)`` from the factory with keyword arguments ``params``."""
+        """``(problem, y0)`` from the factory with keyword arguments ``params``.
+
+        Raises
+        ------
+        ConfigError
+            Arguments the factory does not take; for a model that is not built in, any error
+            of the factory that is not an isoflow error, in one line with its place in the
+            user's code.
+        """
         if self.params is not None:
             params = {
                 k: self.params[k].value(v) if k in self.params else v for k, v in params.items()
             }
+        factory = self.function()
         try:
-            out = self.function()(**params)
+            out = factory(**params)
+        except IsoflowError:
+            raise
         except TypeError as exc:
             raise ConfigError(f"model {self.name!r}: {exc}") from exc
+        except Exception as exc:
+            if self.builtin:
+                raise
+            raise _user_code_error(self.name, "the factory", exc) from exc
         if (
             not isinstance(out, tuple)
             or len(out) != 2
@@ -257,6 +311,56 @@ class ModelSpec:
                 f"iso.IsospectralProblem, got {_describe(out)}"
             )
         return out[0], out[1]
+
+
+def _public_name(exc: BaseException) -> str:
+    """The exception's class name, or its nearest public base (``MemoryError`` for NumPy's
+    ``_ArrayMemoryError``)."""
+    for cls in type(exc).__mro__:
+        if not cls.__name__.startswith("_"):
+            return cls.__name__
+    return type(exc).__name__  # pragma: no cover - object is public
+
+
+def _where(exc: BaseException) -> str:
+    """``file:line`` in the user's code where ``exc`` arose: for a ``SyntaxError`` the line
+    that does not parse, else the deepest line of the first file outside isoflow and the
+    import machinery that the traceback passes through."""
+    if isinstance(exc, SyntaxError) and exc.filename:
+        return f"{exc.filename}:{exc.lineno}"
+    skip = (str(Path(__file__).resolve().parent), str(Path(importlib.__file__).parent), "<frozen ")
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith(skip)]
+    if not frames:
+        return ""
+    user = [f for f in frames if f.filename == frames[0].filename]
+    return f"{user[-1].filename}:{user[-1].lineno}"
+
+
+def _user_code_error(name: str, doing: str, exc: BaseException) -> ConfigError:
+    """One line for an error raised by a user's model code (a module that does not import, a
+    factory that raises): what was being done, the exception and where in the user's code."""
+    where = _where(exc)
+    text = " ".join(str(exc).split()) if not isinstance(exc, SyntaxError) else exc.msg
+    return ConfigError(
+        f"model {name!r}: {doing} raised {_public_name(exc)}"
+        + (f" at {where}" if where else "")
+        + (f": {text}" if text else "")
+    )
+
+
+def _import_module(module_name: str, name: str) -> Any:
+    """Import the module of a user's model, any failure a one-line :class:`ConfigError`."""
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and (module_name == exc.name or module_name.startswith(exc.name + ".")):
+            raise ConfigError(
+                f"model {name!r}: cannot import {module_name!r} ({exc}); is it installed or "
+                "on PYTHONPATH?"
+            ) from exc
+        raise _user_code_error(name, f"importing {module_name!r}", exc) from exc
+    except Exception as exc:
+        raise _user_code_error(name, f"importing {module_name!r}", exc) from exc
 
 
 def _describe(obj: Any) -> str:
@@ -448,13 +552,7 @@ def load_model(name: str) -> ModelSpec:
         return MODELS[name]
     if _is_import_spec(name):
         module_name, _, attr = name.partition(":")
-        try:
-            module = importlib.import_module(module_name)
-        except ImportError as exc:
-            raise ConfigError(
-                f"model {name!r}: cannot import {module_name!r} ({exc}); is it installed or "
-                "on PYTHONPATH?"
-            ) from exc
+        module = _import_module(module_name, name)
         return _spec_from(_resolve(module, attr, name), name)
     eps = _entry_points()
     if name in eps:
@@ -464,6 +562,8 @@ def load_model(name: str) -> ModelSpec:
             raise ConfigError(
                 f"model {name!r} (entry point {eps[name].value!r}) does not load: {exc}"
             ) from exc
+        except Exception as exc:
+            raise _user_code_error(name, f"loading entry point {eps[name].value!r}", exc) from exc
         return _spec_from(obj, name)
     known = sorted(MODELS) + sorted(eps)
     raise ConfigError(
@@ -552,7 +652,7 @@ METHODS: dict[str, MethodSpec] = {
         f"isosyrk-{s}": MethodSpec(
             f"isosyrk-{s}",
             _isosyrk(s),
-            f"isospectral symplectic Gauss RK, {s} stages, order {2 * s}",
+            f"isospectral symplectic Gauss RK, {s} stage{'s' if s > 1 else ''}, order {2 * s}",
         )
         for s in (1, 2, 3)
     },
@@ -674,7 +774,8 @@ def parse_param(spec: ModelSpec, key: str, text: str) -> Any:
 
     A declared parameter is converted to its kind (``"ten"`` for an integer is an error); for a
     model without declared parameters the text is read as a TOML value (``3`` an integer,
-    ``0.5`` a float, ``true`` a boolean, ``[1, 2]`` an array), or kept as a string.
+    ``0.5`` a float, ``true`` a boolean, ``[1, 2]`` an array), or kept as a string; text that
+    starts like a TOML array, table or quoted string but does not parse is an error.
     """
     if spec.params is not None:
         if key not in spec.params:
@@ -685,8 +786,13 @@ def parse_param(spec: ModelSpec, key: str, text: str) -> Any:
 
     try:
         return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
+    except tomllib.TOMLDecodeError as exc:
+        if text.strip()[:1] in ("[", "{", '"', "'"):  # meant as a TOML list, table or string
+            raise ConfigError(
+                f"--param {key}: {text!r} is not a TOML value ({' '.join(str(exc).split())}); "
+                'write a list as [1, 2], a table as {a = 1}, a string as "text"'
+            ) from None
+        return text  # a plain word: the string itself
 
 
 def normalize_config(config: Mapping[str, Any], *, model: ModelSpec | None = None) -> dict:
@@ -939,11 +1045,7 @@ def describe(kind: str) -> list[tuple[str, str, list[str]]]:
     if kind == "models":
         rows = []
         for spec in MODELS.values():
-            lines = [
-                f"{k} ({p.kind.__name__}, default {p.default!r}): {p.help}"
-                + ("" if p.high is None else f" [at most {p.high:g}]")
-                for k, p in (spec.params or {}).items()
-            ]
+            lines = [p.describe(k) for k, p in (spec.params or {}).items()]
             rows.append((spec.name, spec.description, lines))
         for name, ep in sorted(_entry_points().items()):
             rows.append((name, f"registered by an installed package ({ep.value})", []))

@@ -17,8 +17,9 @@ Modules
     The stages: one fixed-point iteration and the new state, per layout.
 ``rules``
     The stopping rules of :mod:`isoflow.nonlinear`, compiled.
-``notice``
-    Reporting a first-use compilation.
+
+Compilations are timed and announced by :mod:`isoflow._compile_clock` (outside this package,
+so that the time loop can start the clock without importing the compiled layer).
 """
 
 from .runner import CompiledRunner, compiled_runner

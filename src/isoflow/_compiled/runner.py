@@ -16,7 +16,6 @@ method's own code, :class:`~isoflow._stepping.PythonRunner`). A compiled path ex
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -293,22 +292,21 @@ class CompiledRunner(Runner):
 
     def _call(self, args: tuple[Any, ...]) -> None:
         """Run the compiled driver on ``args``; the first call gets it from :meth:`_driver`
-        and compiles it (timed, with the compile notice), later calls reuse it. A parallel
-        driver hands out its units in pieces of :attr:`_chunk`."""
+        and compiles it (or loads it from numba's cache; a compilation is announced), later
+        calls reuse it. A parallel driver hands out its units in pieces of :attr:`_chunk`."""
         import numba
 
         chunk = self._chunk if self.parallel else 0  # 0: numba's static split
         head = (self.begin, self.impl.iterate, self.impl.finish, self.f, self.fargs)
         if self._drive is None:
-            from .notice import compile_notice
+            from .._compile_clock import compile_notice
 
-            start = time.perf_counter()
-            with compile_notice(f"{self.layout.name} with {getattr(self.f, '__name__', 'B')}"):
+            what = f"{self.layout.name} with {getattr(self.f, '__name__', 'B')}"
+            with compile_notice(f"the compiled loop for {what}"):
                 drive = self._driver(args)
                 with numba.parallel_chunksize(chunk):
                     drive(*head, *args)
             self._drive = drive
-            self.compile_seconds = time.perf_counter() - start
         else:
             with numba.parallel_chunksize(chunk):
                 self._drive(*head, *args)

@@ -202,7 +202,9 @@ class Algebra(ABC):
         scale : float
             Standard deviation of each coordinate.
         """
-        rng = np.random.default_rng(seed)
+        from .._seeds import generator
+
+        rng = generator(seed, f"{self.name}.random: seed")
         coords = rng.standard_normal((*batch, self.dim)) * scale
         return self.from_coords(coords)
 

@@ -171,7 +171,7 @@ class EulerSphere(Experiment):
 
     def figure(self, result: ExperimentResult) -> Figure:
         from ..sphere import degree_order
-        from ..sphere.figures import draw_map
+        from ..sphere.figures import draw_energy_spectrum, draw_map
 
         self._check_result(result)
         d, p = result.data, result.summary["parameters"]
@@ -197,15 +197,8 @@ class EulerSphere(Experiment):
         )
         fig.colorbar(im, ax=axes[0, 2], shrink=0.8, label=r"$\psi$")
         ax = axes[1, 0]
-        top = max(float(np.max(E)) for E in d["spectra"].values())
-        for label, E in d["spectra"].items():
-            pos = np.asarray(E) > 1e-14 * top  # below: zero up to the rounding of the transform
-            ax.loglog(np.arange(1, len(E) + 1), np.where(pos, E, np.nan), label=label)
-        ax.set_xlabel("degree $l$")
-        ax.set_ylim(top * 1e-10, top * 3)
-        ax.set_ylabel(r"$E_l = \sum_m \omega_{lm}^2 / (l(l+1))$")
+        draw_energy_spectrum(ax, d["spectra"])
         ax.set_title("energy spectrum")
-        ax.legend(fontsize=8)
         ax = axes[1, 1]
         ax.plot(ts, d["large_scale_fraction"], color="C2", label=f"$l \\leq {LARGE_SCALE_LMAX}$")
         ax.set_ylim(0, 1)

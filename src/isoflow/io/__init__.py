@@ -16,7 +16,7 @@ checkpoint). One job per module:
 * :mod:`~isoflow.io.resume`: :func:`resume`;
 * :mod:`~isoflow.io.export`: :func:`to_xarray`, :func:`to_netcdf`, :func:`solution_diagnostics`.
 
-:func:`open_sweep` reads a sweep directory (:mod:`isoflow.sweep`) as one xarray Dataset.
+A sweep directory (:mod:`isoflow.sweep`) is read by :func:`isoflow.sweep.open_sweep`.
 
 Guarantees
 ----------
@@ -29,9 +29,6 @@ damaged rows where a checksum fails), never silently different data.
 
 from __future__ import annotations
 
-import os
-from typing import Any
-
 from .._errors import ResultFileError, ResultWriteError
 from .._solve import StreamWriter
 from .export import solution_diagnostics, to_netcdf, to_xarray
@@ -39,18 +36,6 @@ from .layout import FORMAT, FORMAT_VERSION
 from .reader import Checkpoint, RunData, info, load
 from .resume import resume
 from .writer import HDF5Writer
-
-
-def open_sweep(directory: str | os.PathLike[str], where: Any = None) -> Any:
-    """The results of a sweep directory as one lazy xarray Dataset with a ``member`` dimension.
-
-    The same as :func:`isoflow.sweep.open_sweep` (see there), here beside the readers of
-    single result files; the sweep package loads (with dask and xarray) on the first call.
-    """
-    from ..sweep.results import open_sweep as _open_sweep
-
-    return _open_sweep(directory, where)
-
 
 __all__ = [
     "FORMAT",
@@ -63,7 +48,6 @@ __all__ = [
     "StreamWriter",
     "info",
     "load",
-    "open_sweep",
     "resume",
     "solution_diagnostics",
     "to_netcdf",

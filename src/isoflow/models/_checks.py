@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -9,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._errors import DtypeError, NonFiniteError, ParameterError
 
-__all__ = ["check_n", "real_parameter"]
+__all__ = ["available_memory", "check_n", "real_parameter", "require_memory"]
 
 Array = NDArray[Any]
 
@@ -32,3 +33,56 @@ def real_parameter(value: ArrayLike, what: str) -> Array:
     if not np.all(np.isfinite(arr)):
         raise NonFiniteError(f"All entries of {what} must be finite (found NaN or Inf).")
     return arr
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation now (Linux ``MemAvailable``: free memory
+    plus what the kernel can reclaim), or ``None`` where this cannot be told."""
+    try:
+        import psutil
+    except ImportError:
+        pass
+    else:
+        return int(psutil.virtual_memory().available)
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _size(nbytes: float) -> str:
+    return f"{nbytes / 2**30:.1f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.0f} MiB"
+
+
+def require_memory(state_bytes: float, peak_states: float, what: str) -> None:
+    """Refuse to build a model whose construction needs more memory than is available.
+
+    Parameters
+    ----------
+    state_bytes : float
+        Bytes of the model's state.
+    peak_states : float
+        Peak memory of the construction in states (measured per model).
+    what : str
+        The model and the parameter that sets the size (``"euler_sphere: N = 20000"``).
+
+    Raises
+    ------
+    ParameterError
+        Naming the estimate and the available memory.
+    """
+    need = state_bytes * peak_states
+    have = available_memory()
+    if have is not None and need > have:
+        raise ParameterError(
+            f"{what} needs about {_size(need)} of memory to build ({peak_states:g} times the "
+            f"{_size(state_bytes)} state), more than the {_size(have)} available here; "
+            "choose a smaller size"
+        )

@@ -18,10 +18,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import DtypeError, NonFiniteError, ParameterError, ShapeError
+from .._seeds import generator
 from ..algebras import herm
 from ..kernels import ElementwiseLinear
 from ..problems import IsospectralProblem
-from ._checks import check_n
+from ._checks import check_n, require_memory
 
 __all__ = ["BROCKETT_DEFAULT_SCALE", "brockett"]
 
@@ -29,6 +30,10 @@ Array = NDArray[Any]
 
 #: Default spectral norm :math:`\|W_0\|_2` of the random initial state (see :func:`brockett`).
 BROCKETT_DEFAULT_SCALE = 0.75
+
+#: Peak memory of building the model, in states (tracemalloc, n = 1000 and 2000): a size
+#: that does not fit in the available memory is refused before anything is allocated.
+_BUILD_PEAK_STATES = 23.0
 
 
 def _hermitian_N(N: ArrayLike | None, n: int) -> tuple[Array, Array | None]:
@@ -144,6 +149,7 @@ def brockett(
     True
     """
     n = check_n(n, 2, "brockett")
+    require_memory(16.0 * n * n, _BUILD_PEAK_STATES, f"brockett: n = {n}")
     if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)):
         raise ParameterError(f"brockett: scale must be a real number, got {scale!r}")
     if not (np.isfinite(scale) and scale > 0):
@@ -153,7 +159,7 @@ def brockett(
     alg = herm(n)
 
     if W0 is None:
-        G = alg.random(seed)
+        G = alg.random(generator(seed, "brockett: seed"))
         W_init = float(scale) * G / np.linalg.norm(G, 2)
         W_init = alg.project(W_init)
     else:

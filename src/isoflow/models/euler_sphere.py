@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
+from .._seeds import generator
 from ..algebras import su
 from ..kernels import CompiledB
 from ..problems import IsospectralProblem
@@ -64,10 +65,16 @@ from ..sphere import (
     vorticity_from_function,
 )
 from ..sphere._operators import check_N
+from ._checks import require_memory
 
 __all__ = ["coriolis_matrix", "euler_sphere"]
 
 Array = NDArray[Any]
+
+
+#: Peak memory of building the model, in states (tracemalloc, N = 500..2000): a
+#: size that does not fit in the available memory is refused before anything is allocated.
+_BUILD_PEAK_STATES = 5.5
 
 
 def coriolis_matrix(N: int, omega: float) -> Array:
@@ -160,8 +167,9 @@ def euler_sphere(
     Raises
     ------
     ParameterError
-        Bad ``N``, ``omega``, ``rms``, band, an unknown ``initial`` string, or both
-        ``initial`` data and ``W0``.
+        Bad ``N``, ``omega``, ``rms``, band, ``seed`` (an integer >= 0), an unknown
+        ``initial`` string, or both ``initial`` data and ``W0``; an ``N`` whose construction
+        needs more memory than is available (about 88 N^2 bytes: N = 20000 needs 33 GiB).
     ShapeError
         Coefficients of a wrong length or of degree above ``N - 1``; ``W0`` of a wrong shape.
     NotInSpaceError
@@ -189,11 +197,13 @@ def euler_sphere(
     True
     """
     N = check_N(N, "euler_sphere: N")
+    require_memory(16.0 * N * N, _BUILD_PEAK_STATES, f"euler_sphere: N = {N}")
     Om = _real_parameter(omega, "omega")
     rms = _real_parameter(rms, "rms")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise ParameterError(f"euler_sphere: seed must be an integer, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError(f"euler_sphere: seed must be an integer >= 0, got {seed!r}")
     seed_ = int(seed)
+    rng = generator(seed_, "euler_sphere: seed")
     alg = su(N)
     h = hbar(N)
     lmax_ = min(10, N - 1) if lmax is None else check_N(lmax, "euler_sphere: lmax", minimum=1)
@@ -212,7 +222,7 @@ def euler_sphere(
                 f"euler_sphere: initial must be 'random', coefficients or a function, "
                 f"got {initial!r}"
             )
-        c = random_coefficients(lmax_, lmin=lmin, slope=slope, rms=rms, seed=seed_)
+        c = random_coefficients(lmax_, lmin=lmin, slope=slope, rms=rms, seed=rng)
         W = from_coefficients(c, N)
         kind = "random"
     elif callable(initial):

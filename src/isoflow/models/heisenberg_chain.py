@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
+from .._seeds import generator
 from ..algebras.spin import SpinVectors, dot
 from ..kernels import SpinNeighbourSum
 from ..problems import IsospectralProblem
@@ -125,7 +126,7 @@ def heisenberg_chain(
         w_init = paper_spin_curve(N)
         source = "curve"
     elif initial == "random":
-        g = np.random.default_rng(seed).standard_normal((N, 3))
+        g = generator(seed, "heisenberg_chain: seed").standard_normal((N, 3))
         w_init = g / np.linalg.norm(g, axis=-1, keepdims=True)
         source = "random"
     else:

@@ -29,9 +29,13 @@ from .._errors import ParameterError, ShapeError
 from ..algebras import so
 from ..kernels import ElementwiseLinear
 from ..problems import IsospectralProblem
-from ._checks import check_n, real_parameter
+from ._checks import check_n, real_parameter, require_memory
 
 __all__ = ["ParameterError", "paper_inertia_d", "rigid_body"]
+
+#: Peak memory of building the model, in states (tracemalloc, n = 1000 and 2000): a size
+#: that does not fit in the available memory is refused before anything is allocated.
+_BUILD_PEAK_STATES = 4.2
 
 Array = NDArray[Any]
 
@@ -159,6 +163,7 @@ def rigid_body(
     True
     """
     n = check_n(n, 2, "rigid_body")
+    require_memory(8.0 * n * n, _BUILD_PEAK_STATES, f"rigid_body: n = {n}")
     if inertia is not None and d is not None:
         raise ParameterError("rigid_body: give either inertia or d, not both")
 

@@ -39,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import algebras
 from .._errors import ParameterError, ShapeError
+from .._seeds import generator
 from ..kernels import CompiledB
 from ..problems import IsospectralProblem
 from ._checks import real_parameter
@@ -150,7 +151,7 @@ def spin_lattice(
     h.setflags(write=False)
     N = L1 * L2
     alg = algebras.so3_vectors(N)
-    rng = np.random.default_rng(seed)
+    rng = generator(seed, "spin_lattice: seed")
     if w0 is not None:
         w_init = np.array(alg.validate(w0, "w0"), copy=True)
         source = "user"

@@ -28,12 +28,17 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError, ShapeError
+from .._seeds import generator
 from ..algebras import sym
 from ..kernels import ElementwiseLinear
 from ..problems import IsospectralProblem
-from ._checks import check_n, real_parameter
+from ._checks import check_n, real_parameter, require_memory
 
 __all__ = ["jacobi_coefficients", "jacobi_matrix", "off_band", "toda"]
+
+#: Peak memory of building the model, in states (tracemalloc, n = 1000 and 2000): a size
+#: that does not fit in the available memory is refused before anything is allocated.
+_BUILD_PEAK_STATES = 3.0
 
 Array = NDArray[Any]
 
@@ -190,6 +195,7 @@ def toda(
     True
     """
     n = check_n(n, 2, "toda")
+    require_memory(8.0 * n * n, _BUILD_PEAK_STATES, f"toda: n = {n}")
     if (a is None) != (b is None):
         raise ParameterError("toda: give both a and b, or neither")
     if a is not None and b is not None:
@@ -207,7 +213,7 @@ def toda(
                 "toda: the off-diagonals b_i must be non-zero (b_i = exp((q_i - q_{i+1})/2)/2)"
             )
     elif seed is not None:
-        rng = np.random.default_rng(seed)
+        rng = generator(seed, "toda: seed")
         a_ = rng.standard_normal(n)
         b_ = rng.uniform(0.5, 1.5, n - 1)
     else:

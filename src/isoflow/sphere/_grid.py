@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._errors import NonFiniteError, ParameterError, ShapeError
+from .._errors import DtypeError, NonFiniteError, ParameterError, ShapeError
 from ._basis import _coefficient_array, _lmax_of, coefficient_count, degree_order
 from ._operators import check_N
 
@@ -238,6 +238,26 @@ def evaluate(
     return vals[0].reshape(th.shape)
 
 
+def _real_values(values: ArrayLike, what: str) -> Array:
+    """A function's values on a grid as finite float64, or a one-line error: a vorticity is
+    real, and casting complex values would drop their imaginary parts silently."""
+    arr = np.asarray(values)
+    if arr.dtype.kind == "c":
+        imag = float(np.max(np.abs(arr.imag))) if arr.size else 0.0
+        if imag > 0:
+            raise DtypeError(
+                f"{what} returned complex values (largest imaginary part {imag:.3g}); a "
+                "vorticity is real: return the real field"
+            )
+        arr = arr.real
+    if arr.dtype.kind not in "biuf":
+        raise DtypeError(f"{what} returned {arr.dtype} values, not real numbers")
+    out = arr.astype(np.float64)
+    if not np.all(np.isfinite(out)):
+        raise NonFiniteError(f"{what} returned non-finite values (NaN or Inf)")
+    return out
+
+
 def from_function(
     f: Callable[[Array, Array], ArrayLike],
     lmax: int,
@@ -261,7 +281,7 @@ def from_function(
     ntheta = oversampling * (lmax + 1)
     nphi = 2 * ntheta
     theta, phi = grid(ntheta, nphi, "GL")
-    vals = np.asarray(f(theta[:, None], phi[None, :]), dtype=np.float64)
+    vals = _real_values(f(theta[:, None], phi[None, :]), "from_function: f")
     try:
         vals = np.broadcast_to(vals, (ntheta, nphi))
     except ValueError:

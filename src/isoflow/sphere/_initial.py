@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
+from .._seeds import generator
 from ._basis import degree_order
 from ._basis import from_coefficients as _from_coefficients
 from ._grid import from_function
@@ -62,7 +63,7 @@ def random_coefficients(
     rms = _real(rms, "rms")
     if rms <= 0:
         raise ParameterError(f"rms must be positive, got {rms}")
-    rng = np.random.default_rng(seed)
+    rng = generator(seed, "random_coefficients: seed")
     ls, _ = degree_order(lmax)
     if slope is None:
         var = np.ones(ls.size)

@@ -10,6 +10,7 @@ with ``ducc0`` (:func:`isoflow.sphere.evaluate`).
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -18,16 +19,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._errors import ParameterError, ShapeError
+from .._errors import NonFiniteError, ParameterError, ShapeError
 from ._basis import _coefficient_array, _lmax_of, to_coefficients
 from ._grid import default_grid_shape, evaluate, synthesize
+from ._operators import check_N
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 __all__ = [
+    "SPECTRUM_FLOOR",
     "animate",
+    "draw_energy_spectrum",
     "draw_map",
     "draw_orthographic",
     "plot_energy_spectrum",
@@ -50,6 +54,55 @@ def _coefficients(data: ArrayLike) -> Array:
     c = _coefficient_array(arr, "coefficients")
     _lmax_of(c.shape[-1], "coefficients")
     return c
+
+
+def _number(value: Any) -> float | None:
+    """``value`` as a float if it is a real number (not a bool), else ``None``."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | float | np.number):
+        return None
+    return None if np.iscomplexobj(value) else float(value)
+
+
+def _center(center: Any, what: str) -> tuple[float, float]:
+    """A viewpoint ``(latitude, longitude)`` in degrees, checked."""
+    pair = tuple(center) if isinstance(center, Sequence | np.ndarray) else ()
+    values = [_number(v) for v in pair]
+    if len(values) != 2 or None in values:
+        raise ParameterError(
+            f"{what}: a centre is (latitude, longitude) in degrees, got {center!r}"
+        )
+    lat, lon = float(values[0]), float(values[1])  # type: ignore[arg-type]
+    if not (math.isfinite(lat) and math.isfinite(lon) and -90.0 <= lat <= 90.0):
+        raise ParameterError(
+            f"{what}: a centre needs a finite latitude in [-90, 90] and a finite longitude "
+            f"(degrees), got {center!r}"
+        )
+    return lat, lon
+
+
+def _positive(value: Any, what: str) -> float:
+    """A positive finite number (a resolution in dots per inch, a colour limit)."""
+    x = _number(value)
+    if x is None or not (math.isfinite(x) and x > 0):
+        raise ParameterError(f"{what} must be a positive finite number, got {value!r}")
+    return x
+
+
+def _vmax(vmax: Any, what: str) -> float | None:
+    return None if vmax is None else _positive(vmax, f"{what}: vmax")
+
+
+def _series(values: ArrayLike, n: int | None, what: str) -> Array:
+    """A finite real time series of ``n`` entries (any length ``>= 1`` when ``n`` is None)."""
+    arr = np.asarray(values)
+    if arr.dtype.kind not in "iuf":
+        raise ParameterError(f"{what} must be real numbers, got dtype {arr.dtype}")
+    expected = "(n_t,) with n_t >= 1" if n is None else f"({n},), one per time"
+    if arr.ndim != 1 or arr.size == 0 or (n is not None and arr.size != n):
+        raise ShapeError(f"{what} must have shape {expected}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise NonFiniteError(f"{what} must be finite (found NaN or Inf)")
+    return arr.astype(float)
 
 
 def _symmetric_limit(values: Array, vmax: float | None) -> float:
@@ -78,9 +131,11 @@ def draw_map(
     c = _coefficients(data)
     if c.ndim != 1:
         raise ShapeError(f"draw_map: give one vorticity field, got shape {c.shape}")
+    vmax = _vmax(vmax, "draw_map")
     lmax = _lmax_of(c.shape[-1], "draw_map")
     dt, dp = default_grid_shape(lmax)
-    ntheta, nphi = ntheta or max(dt, 90), nphi or max(dp, 180)
+    ntheta = max(dt, 90) if ntheta is None else check_N(ntheta, "draw_map: ntheta", minimum=2)
+    nphi = max(dp, 180) if nphi is None else check_N(nphi, "draw_map: nphi", minimum=1)
     vals = synthesize(c, ntheta, nphi, geometry="CC")
     vals = np.concatenate([vals, vals[:, :1]], axis=1)  # close the longitude circle
     lim = _symmetric_limit(vals, vmax)
@@ -132,11 +187,15 @@ def draw_orthographic(
     graticule: bool = True,
 ) -> Any:
     """Draw the vorticity seen from above ``center = (latitude, longitude)`` [deg] into
-    ``ax`` (orthographic projection of the visible hemisphere); returns the image."""
+    ``ax`` (orthographic projection of the visible hemisphere, ``resolution`` pixels across,
+    at least 3); returns the image."""
     c = _coefficients(data)
     if c.ndim != 1:
         raise ShapeError(f"draw_orthographic: give one vorticity field, got shape {c.shape}")
-    colat, lon, inside = _ortho_points(center, int(resolution))
+    center = _center(center, "draw_orthographic")
+    resolution = check_N(resolution, "draw_orthographic: resolution", minimum=3)
+    vmax = _vmax(vmax, "draw_orthographic")
+    colat, lon, inside = _ortho_points(center, resolution)
     vals = np.full(colat.shape, np.nan)
     vals[inside] = evaluate(c, colat[inside], lon[inside])
     lim = _symmetric_limit(vals[inside], vmax)
@@ -205,10 +264,17 @@ def plot_orthographic(
     from matplotlib.figure import Figure
 
     c = _coefficients(data)
-    centers = list(centers)
+    if c.ndim != 1:
+        raise ShapeError(f"plot_orthographic: give one vorticity field, got shape {c.shape}")
+    if isinstance(centers, str) or not isinstance(centers, Sequence | np.ndarray):
+        raise ParameterError(
+            f"plot_orthographic: centers is a list of (latitude, longitude), got {centers!r}"
+        )
+    centers = [_center(ctr, "plot_orthographic") for ctr in centers]
     if not centers:
         raise ParameterError("plot_orthographic: give at least one center")
-    lim = vmax
+    check_N(resolution, "plot_orthographic: resolution", minimum=3)
+    lim = _vmax(vmax, "plot_orthographic")
     if lim is None:
         lim = float(np.max(np.abs(synthesize(c, *default_grid_shape(_lmax_of(c.size, "c"))))))
     fig = Figure(figsize=(3.6 * len(centers) + 0.8, 3.9), layout="constrained")
@@ -222,13 +288,77 @@ def plot_orthographic(
     return fig
 
 
+#: Spectrum values below this fraction of the largest are zero up to the rounding of the
+#: transforms (degrees the data do not have); they are left out of spectrum plots.
+SPECTRUM_FLOOR = 1e-14
+
+
+def draw_energy_spectrum(
+    ax: Axes,
+    spectra: Mapping[str, ArrayLike],
+    *,
+    reference_slopes: Sequence[float] = (),
+) -> None:
+    r"""Draw log–log energy spectra :math:`E_l` against degree ``l`` into ``ax``.
+
+    ``spectra`` maps a label to a spectrum ``(lmax,)`` (degrees ``1..lmax``) or a vorticity
+    matrix ``(N, N)`` (complex; its spectrum is computed). Values below
+    :data:`SPECTRUM_FLOOR` times the largest are left out, and the vertical axis spans the
+    values drawn (with a margin), not the rounding level below them.
+    ``reference_slopes`` adds dashed power laws :math:`l^{s}` through the largest value.
+
+    Raises
+    ------
+    ShapeError
+        A spectrum that is not one vector (or one matrix), or an empty one.
+    """
+    curves = [(label, _spectrum(label, d)) for label, d in spectra.items()]
+    if not curves:
+        raise ShapeError("draw_energy_spectrum: give at least one spectrum")
+    top = max(float(np.max(E)) for _, E in curves)
+    shown = []
+    for label, E in curves:
+        keep = E > SPECTRUM_FLOOR * top if top > 0 else np.zeros(E.shape, dtype=bool)
+        ax.loglog(np.arange(1, E.size + 1), np.where(keep, E, np.nan), label=label)
+        shown.append(E[keep])
+    values = np.concatenate(shown)
+    if values.size:
+        lmax = max(E.size for _, E in curves)
+        ls = np.arange(1, lmax + 1)
+        for s in reference_slopes:
+            ax.loglog(ls, top * ls**s, "k--", lw=0.7, label=f"$l^{{{s:g}}}$")
+        ax.set_ylim(float(np.min(values)) / 3, top * 3)
+    ax.set_xlabel("degree $l$")
+    ax.set_ylabel(r"$E_l = \sum_m \omega_{lm}^2 / (l(l+1))$")
+    ax.legend(fontsize=8)
+
+
+def _spectrum(label: str, data: ArrayLike) -> Array:
+    """The energy spectrum ``(lmax,)`` of ``data``: a spectrum itself or a vorticity matrix."""
+    from ._diagnostics import energy_spectrum
+
+    arr = np.asarray(data)
+    if np.iscomplexobj(arr):
+        if arr.ndim != 2 or arr.shape[0] != arr.shape[1]:
+            raise ShapeError(
+                f"spectrum {label!r}: a vorticity matrix must have shape (N, N), got {arr.shape}"
+            )
+        return np.asarray(energy_spectrum(arr), dtype=float)
+    if arr.dtype.kind not in "iuf" or arr.ndim != 1 or arr.size == 0:
+        raise ShapeError(
+            f"spectrum {label!r}: give E_l for l = 1..lmax as a non-empty real vector, got "
+            f"shape {arr.shape} of dtype {arr.dtype}"
+        )
+    return arr.astype(float)
+
+
 def plot_energy_spectrum(
     spectra: Mapping[str, ArrayLike],
     *,
     title: str | None = None,
     reference_slopes: Sequence[float] = (-3.0,),
 ) -> Figure:
-    r"""Log–log energy spectra :math:`E_l` against degree ``l``.
+    r"""Log–log energy spectra :math:`E_l` against degree ``l`` (:func:`draw_energy_spectrum`).
 
     ``spectra`` maps a label (e.g. ``"t = 0"``) to either a spectrum ``(lmax,)`` (degrees
     ``1..lmax``) or a vorticity matrix ``(N, N)`` (complex; its spectrum is computed).
@@ -236,31 +366,10 @@ def plot_energy_spectrum(
     """
     from matplotlib.figure import Figure
 
-    from ._diagnostics import energy_spectrum
-
     fig = Figure(figsize=(6, 4.5), layout="constrained")
     ax = fig.subplots()
-    top, bottom = 0.0, np.inf
-    lmax_all = 1
-    for label, d in spectra.items():
-        arr = np.asarray(d)
-        E = energy_spectrum(arr) if np.iscomplexobj(arr) else np.asarray(arr, dtype=float)
-        ls = np.arange(1, E.shape[-1] + 1)
-        pos = E > 0
-        ax.loglog(ls, np.where(pos, E, np.nan), label=label)  # zero degrees left out
-        if np.any(pos):
-            top = max(top, float(np.max(E[pos])))
-            bottom = min(bottom, float(np.min(E[pos])))
-        lmax_all = max(lmax_all, int(ls[-1]))
-    if top > 0:
-        ls = np.arange(1, lmax_all + 1)
-        for s in reference_slopes:
-            ax.loglog(ls, top * ls**s, "k--", lw=0.7, label=f"$l^{{{s:g}}}$")
-        ax.set_ylim(max(0.3 * bottom, top * 1e-14), top * 3)
-    ax.set_xlabel("degree $l$")
-    ax.set_ylabel(r"$E_l = \sum_m \omega_{lm}^2 / (l(l+1))$")
+    draw_energy_spectrum(ax, spectra, reference_slopes=reference_slopes)
     ax.set_title(title or "energy spectrum")
-    ax.legend(fontsize=8)
     return fig
 
 
@@ -281,12 +390,23 @@ def plot_invariants(
     """
     from matplotlib.figure import Figure
 
-    t = np.asarray(ts, dtype=float)
+    t = _series(ts, None, "plot_invariants: ts")
+    if casimirs is not None:
+        C = np.asarray(casimirs)
+        if C.ndim != 2 or C.shape[0] != t.size or C.shape[1] == 0:
+            raise ShapeError(
+                f"plot_invariants: casimirs must have shape ({t.size}, K), one row per time, "
+                f"got {C.shape}"
+            )
+        C = np.stack([_series(col, t.size, "plot_invariants: casimirs") for col in C.T], axis=1)
+    energy = None if energy is None else _series(energy, t.size, "plot_invariants: energy")
+    enstrophy = (
+        None if enstrophy is None else _series(enstrophy, t.size, "plot_invariants: enstrophy")
+    )
     fig = Figure(figsize=(7, 5), layout="constrained")
     axes = fig.subplots(2, 1, sharex=True)
     floor = 1e-18
     if casimirs is not None:
-        C = np.asarray(casimirs, dtype=float).reshape(len(t), -1)
         for j in range(C.shape[1]):
             ref = abs(C[0, j]) if j % 2 == 0 else float(np.max(np.abs(C[:, j])))
             ref = ref if ref > 0 else 1.0
@@ -321,7 +441,7 @@ def animate(
     fps: int = 10,
     vmax: float | None = None,
     title: str | None = None,
-    dpi: int = 80,
+    dpi: float = 80,
 ) -> Path:
     """Write a movie of a sequence of vorticity states.
 
@@ -337,12 +457,25 @@ def animate(
     kind : {"map", "orthographic"}
     center : (latitude, longitude) in degrees, for ``kind="orthographic"``.
     fps : int
+        Frames per second (a positive integer).
     vmax : float, optional
         Colour limit (default: the largest ``|omega|`` over all frames, fixed for the movie).
+    title : str, optional
+        Title of every frame (followed by the frame's time).
+    dpi : float
+        Resolution of the frames in dots per inch (positive).
 
     Returns
     -------
     Path
+
+    Raises
+    ------
+    ParameterError
+        A bad path suffix, ``kind``, ``center``, ``fps``, ``dpi`` or ``vmax``, or ``.mp4``
+        without ffmpeg.
+    ShapeError
+        Not a sequence of states, or ``ts`` not one finite time per state.
     """
     from matplotlib import animation
     from matplotlib.figure import Figure
@@ -358,13 +491,15 @@ def animate(
             "animate: writing .mp4 needs the ffmpeg program, which was not found; "
             "write a .gif (Pillow) instead, or install ffmpeg"
         )
+    rate = check_N(fps, "animate: fps", minimum=1)
+    dots = _positive(dpi, "animate: dpi")
+    center = _center(center, "animate")
+    vmax = _vmax(vmax, "animate")
     c = _coefficients(states)
     if c.ndim != 2 or c.shape[0] < 1:
         raise ShapeError(f"animate: expected a sequence of states, got coefficients {c.shape}")
     n = c.shape[0]
-    times = None if ts is None else np.asarray(ts, dtype=float)
-    if times is not None and times.shape != (n,):
-        raise ShapeError(f"animate: ts must have shape ({n},), got {times.shape}")
+    times = None if ts is None else _series(ts, n, "animate: ts")
     lmax = _lmax_of(c.shape[-1], "animate")
     if vmax is None:
         vmax = float(np.max(np.abs(synthesize(c, *default_grid_shape(lmax)))))
@@ -382,12 +517,12 @@ def animate(
 
     writer: Any
     if suffix == ".gif":
-        writer = animation.PillowWriter(fps=fps)
+        writer = animation.PillowWriter(fps=rate)
     else:
-        writer = animation.FFMpegWriter(fps=fps)
+        writer = animation.FFMpegWriter(fps=rate)
     draw(0)
     fig.colorbar(ax.images[0], ax=ax, label=r"$\omega$", shrink=0.85)
-    with writer.saving(fig, str(p), dpi):
+    with writer.saving(fig, str(p), dots):
         for k in range(n):
             draw(k)
             writer.grab_frame()

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib
+import inspect
 import itertools
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -26,17 +29,31 @@ from .._errors import IsoflowError
 from .._solve import time_grid
 
 __all__ = [
+    "MAX_MEMBERS",
+    "MAX_SAVED",
     "MEMBERS_PER_TASK",
     "Member",
+    "MissingExtraError",
     "SweepError",
     "SweepSpec",
     "Task",
     "canonical_json",
     "read_spec",
+    "require_extra",
 ]
 
 #: Default largest number of members solved as one ensemble (one task).
 MEMBERS_PER_TASK = 32
+
+#: Most members of one sweep (``[[members]]`` rows times the grid), counted before they are
+#: listed: beyond it, expanding, checking and recording the members (about 80 us and 80 bytes
+#: of manifest each) would take longer than a user waits without knowing why. Split larger
+#: sweeps; each part is a sweep of its own.
+MAX_MEMBERS = 100_000
+
+#: Most saved states per member (``n_steps / save_every``), also a bound the readers of a
+#: sweep directory trust.
+MAX_SAVED = 1 << 24
 
 #: Keys of a sweep file (``params``, ``grid`` and ``members`` are tables).
 _TOP_KEYS = frozenset(
@@ -50,6 +67,28 @@ _RUN_KEYS = ("method", "solver", "rtol", "anderson", "t0", "save_every")
 
 class SweepError(IsoflowError, ValueError):
     """A sweep file or sweep directory is not usable (one line, said before anything runs)."""
+
+
+class MissingExtraError(IsoflowError, ImportError):
+    """A module of the ``[sweep]`` extra (dask, distributed, xarray) is not installed."""
+
+
+def require_extra(*modules: str) -> None:
+    """Import ``modules`` (of the ``[sweep]`` extra) or say in one line how to install them.
+
+    Raises
+    ------
+    MissingExtraError
+        One of them does not import.
+    """
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ImportError as exc:
+            raise MissingExtraError(
+                f"sweeps need the sweep extra (dask, distributed, xarray), and {name} does not "
+                f"import ({' '.join(str(exc).split())}): pip install 'isoflow[sweep]'"
+            ) from None
 
 
 def canonical_json(obj: Any) -> str:
@@ -94,14 +133,17 @@ class Task:
     Attributes
     ----------
     id : str
-        First 20 hex digits of the SHA-256 of the canonical JSON of the model, method, time
-        grid, perturbation and members (:meth:`SweepSpec.task_id`): equal tasks of two sweeps
-        share their files.
+        First 20 hex digits of :attr:`digest`: equal tasks of two sweeps share their files.
     members : tuple of Member
+    digest : str
+        The SHA-256 of the canonical JSON of the model, method, time grid, perturbation and
+        members (:meth:`SweepSpec.task_digest`), recorded in the task's result file, which
+        is resumed only by the task it names.
     """
 
     id: str
     members: tuple[Member, ...]
+    digest: str = ""
 
 
 @dataclass(frozen=True)
@@ -150,8 +192,8 @@ class SweepSpec:
         """The registry run configuration of ``member`` (what its result file records)."""
         return {"model": self.model, "params": dict(member.params), **self.run}
 
-    def task_id(self, members: Sequence[Member]) -> str:
-        """The content address of a task of ``members`` (see :class:`Task`)."""
+    def task_digest(self, members: Sequence[Member]) -> str:
+        """The content hash of a task of ``members`` (see :class:`Task`)."""
         blob = canonical_json(
             {
                 "model": self.model,
@@ -161,7 +203,11 @@ class SweepSpec:
                 "members": [m.key() for m in members],
             }
         )
-        return hashlib.sha256(blob.encode()).hexdigest()[:20]
+        return hashlib.sha256(blob.encode()).hexdigest()
+
+    def task_id(self, members: Sequence[Member]) -> str:
+        """The content address of a task of ``members``: its digest's first 20 hex digits."""
+        return self.task_digest(members)[:20]
 
     def task_of(self, task_id: str) -> Task:
         """The task called ``task_id``."""
@@ -169,6 +215,11 @@ class SweepSpec:
             if t.id == task_id:
                 return t
         raise SweepError(f"the sweep has no task {task_id!r}")
+
+    def for_task(self, task: Task) -> SweepSpec:
+        """This sweep reduced to ``task`` (what a worker needs: its size does not grow with
+        the sweep's)."""
+        return dataclasses.replace(self, members=task.members, tasks=(task,), source={})
 
 
 # ---- reading -----------------------------------------------------------------------------------
@@ -228,11 +279,17 @@ def _table(value: Any, what: str) -> dict[str, Any]:
     return dict(value)
 
 
-def _grid_values(key: str, value: Any) -> list[Any]:
-    """The values of a ``[grid]`` column: a list, ``{start, stop[, step]}`` or ``{.., num}``."""
+def _grid_column(key: str, value: Any) -> tuple[int, Callable[[], list[Any]]]:
+    """A ``[grid]`` column, checked: its length and a function listing its values.
+
+    A list, ``{start, stop[, step]}`` (integers, like ``range``) or ``{start, stop, num}``
+    (numbers, like ``linspace``). The length is known before any value is made, so that a
+    sweep too large to run is refused before it takes the memory to list it.
+    """
     what = f"grid.{key}"
+    make: Callable[[], list[Any]]
     if isinstance(value, list):
-        values = value
+        length, make = len(value), partial(list, value)
     elif isinstance(value, Mapping):
         keys = set(value)
         if keys in ({"start", "stop"}, {"start", "stop", "step"}):
@@ -246,14 +303,15 @@ def _grid_values(key: str, value: Any) -> list[Any]:
                     )
             if step == 0:
                 raise SweepError(f"{what}: step must not be 0")
-            values = list(range(start, stop, step))
+            span = range(start, stop, step)
+            length, make = len(span), partial(list, span)
         elif keys == {"start", "stop", "num"}:
-            start, stop, num = value["start"], value["stop"], value["num"]
+            start, stop = value["start"], value["stop"]
             for name, v in (("start", start), ("stop", stop)):
                 if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
                     raise SweepError(f"{what}: {name} must be a number, got {v!r}")
-            num = _int(num, f"{what}.num", 1)
-            values = [float(v) for v in np.linspace(float(start), float(stop), num)]
+            length = _int(value["num"], f"{what}.num", 1)
+            make = partial(_linspace, float(start), float(stop), length)
         else:
             raise SweepError(
                 f"{what} must be a list, {{start, stop[, step]}} (integers, like range) or "
@@ -261,9 +319,28 @@ def _grid_values(key: str, value: Any) -> list[Any]:
             )
     else:
         raise SweepError(f"{what} must be a list or a table, got {value!r}")
-    if not values:
+    if length == 0:
         raise SweepError(f"{what} is empty")
-    return values
+    return length, make
+
+
+def _linspace(start: float, stop: float, num: int) -> list[float]:
+    return [float(v) for v in np.linspace(start, stop, num)]
+
+
+def _check_count(n_rows: int, lengths: dict[str, int]) -> None:
+    """Refuse a sweep of more than :data:`MAX_MEMBERS` members, saying how to split it."""
+    count = max(n_rows, 1) * math.prod(lengths.values())
+    if count <= MAX_MEMBERS:
+        return
+    factors = ([f"{n_rows} [[members]] row" + "s" * (n_rows > 1)] if n_rows else []) + [
+        f"{n} values of {k}" for k, n in lengths.items()
+    ]
+    raise SweepError(
+        f"the sweep has {count:,} members ({' x '.join(factors)}), more than the limit of "
+        f"{MAX_MEMBERS:,}: split it into several sweeps of at most {MAX_MEMBERS:,} members "
+        "(e.g. one per value of a grid column), each with its own directory"
+    )
 
 
 def _rows(table: dict[str, Any]) -> list[dict[str, Any]]:
@@ -279,13 +356,37 @@ def _rows(table: dict[str, Any]) -> list[dict[str, Any]]:
     grid = _table(table.get("grid", {}), "grid")
     if not rows and not grid:
         raise SweepError("the sweep has no members: give [[members]] rows and/or a [grid]")
-    columns = {k: _grid_values(k, v) for k, v in grid.items()}
-    combos = [dict(zip(columns, c, strict=True)) for c in itertools.product(*columns.values())]
+    columns = {k: _grid_column(k, v) for k, v in grid.items()}
+    _check_count(len(rows), {k: n for k, (n, _make) in columns.items()})
+    values = {k: make() for k, (_n, make) in columns.items()}
+    combos = [dict(zip(values, c, strict=True)) for c in itertools.product(*values.values())]
     out = []
     for r in rows or [{}]:
         for c in combos:
             out.append(c | dict(r))  # the member's own value wins
     return out
+
+
+def _has_seed(model: registry.ModelSpec) -> bool:
+    """Whether ``seed`` is a parameter of the model itself (declared, or a named argument of
+    a user's plain factory) rather than the seed of the sweep's perturbation."""
+    if model.params is not None:
+        return "seed" in model.params
+    try:
+        signature = inspect.signature(model.function())
+    except (TypeError, ValueError):  # a callable without a signature: not a named argument
+        return False
+    seed = signature.parameters.get("seed")
+    return seed is not None and seed.kind in (seed.POSITIONAL_OR_KEYWORD, seed.KEYWORD_ONLY)
+
+
+def _check_saved(n_steps: int, save_every: int) -> None:
+    saved = n_steps // save_every + 1
+    if saved > MAX_SAVED:
+        raise SweepError(
+            f"a member would save {saved:,} states (n_steps / save_every), more than "
+            f"{MAX_SAVED:,}: save less often (a larger save_every)"
+        )
 
 
 def _build(table: dict[str, Any]) -> SweepSpec:
@@ -316,7 +417,7 @@ def _build(table: dict[str, Any]) -> SweepSpec:
             if k not in model.params:
                 raise SweepError(f"initial: model {model.name!r} has no parameter {k!r}")
     initial_all = tuple(dict.fromkeys([*model.initial, *initial]))
-    own_seed = model.params is not None and "seed" in model.params
+    own_seed = _has_seed(model)
 
     base = {k: table[k] for k in (*_RUN_KEYS, *_TIME_KEYS) if k in table}
     members: list[Member] = []
@@ -351,6 +452,7 @@ def _build(table: dict[str, Any]) -> SweepSpec:
             grid_of = (dt, n)
             run = {k: cfg[k] for k in ("method", "solver", "rtol", "anderson") if k in cfg}
             run |= {"t0": cfg["t0"], "dt": dt, "n_steps": n, "save_every": cfg["save_every"]}
+            _check_saved(n, cfg["save_every"])
         elif (dt, n) != grid_of:
             raise SweepError(
                 f"{what}: the time grid (dt = {dt:g}, {n} steps) differs from member 0's "
@@ -398,5 +500,6 @@ def _with_tasks(spec: SweepSpec) -> SweepSpec:
     for group in groups.values():
         for start in range(0, len(group), spec.members_per_task):
             chunk = tuple(group[start : start + spec.members_per_task])
-            tasks.append(Task(spec.task_id(chunk), chunk))
+            digest = spec.task_digest(chunk)
+            tasks.append(Task(digest[:20], chunk, digest))
     return dataclasses.replace(spec, tasks=tuple(tasks))

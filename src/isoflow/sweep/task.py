@@ -1,8 +1,10 @@
 """One task: build its members' ensemble, run (or resume) it into ``tasks/<id>.h5``, summarize.
 
 :func:`run_task` is what a dask worker executes; it imports no dask. A task is idempotent:
-done (summary present) it returns the summary; partial (a result file with a checkpoint) it
-resumes bit for bit with :func:`isoflow.io.resume`; otherwise it starts afresh.
+done (a valid summary, its result file unchanged) it returns the summary; partial (a result
+file of this task, as its ``sweep`` mark says, with a checkpoint) it resumes bit for bit with
+:func:`isoflow.io.resume`; otherwise (nothing, a damaged file, another task's file) it starts
+afresh.
 """
 
 from __future__ import annotations
@@ -23,10 +25,19 @@ import numpy as np
 
 from .._errors import IsoflowError
 from .._solve import Solution, solve
-from .files import read_json, task_paths, write_json_atomic
-from .spec import Member, SweepSpec, Task, canonical_json
+from .files import TaskPaths, file_sha256, read_summary, seal, task_paths, write_json_atomic
+from .spec import Member, SweepError, SweepSpec, Task, canonical_json
 
-__all__ = ["build_member", "build_task", "member_run", "run_task", "watch_client"]
+__all__ = [
+    "build_member",
+    "build_task",
+    "layout_of",
+    "member_run",
+    "run_task",
+    "sweep_mark",
+    "task_layouts",
+    "watch_client",
+]
 
 Array = Any
 
@@ -158,9 +169,39 @@ def _per_member(value: Any, m: int) -> list[float]:
     return [float(v) for v in np.broadcast_to(arr.reshape(-1) if arr.size == m else arr, (m,))]
 
 
-def _summary(spec: SweepSpec, task: Task, sol: Solution, problem: Any, Y: Array) -> dict:
+def layout_of(problem: Any, Y: Array) -> dict[str, Any]:
+    """Shapes and dtypes of a member's state and saved series (``Y``: members first)."""
     from ..diagnostics import series
 
+    shapes = {
+        name: {"shape": list(np.shape(v)[2:]), "dtype": str(np.asarray(v).dtype)}
+        for name, v in series(problem, Y[None]).items()
+    }
+    return {"state_shape": list(Y.shape[1:]), "state_dtype": str(Y.dtype), "series": shapes}
+
+
+def task_layouts(spec: SweepSpec) -> dict[str, dict[str, Any] | None]:
+    """Task id -> :func:`layout_of` its members (``None`` where the model cannot be built).
+
+    One member is built per group of tasks that share a problem (the same parameters but the
+    initial-data ones), so that the readers know the shape of a task's results before it ran.
+    """
+    out: dict[str, dict[str, Any] | None] = {}
+    known: dict[str, dict[str, Any] | None] = {}
+    for t in spec.tasks:
+        first = t.members[0]
+        group = canonical_json({k: v for k, v in first.params.items() if k not in spec.initial})
+        if group not in known:
+            try:
+                problem, y0 = build_member(spec, first)
+                known[group] = layout_of(problem, y0[None])
+            except Exception:  # the task's own run reports why (status "error")
+                known[group] = None
+        out[t.id] = known[group]
+    return out
+
+
+def _summary(spec: SweepSpec, task: Task, sol: Solution, problem: Any, Y: Array) -> dict:
     m = len(task.members)
     failed = np.asarray(sol.failed_step).reshape(-1)
     if failed.size != m:
@@ -181,10 +222,6 @@ def _summary(spec: SweepSpec, task: Task, sol: Solution, problem: Any, Y: Array)
                 drifts[name] = _per_member(v, m)
         for name, v in d.invariant_drift.items():
             drifts[f"{name}_drift"] = _per_member(v, m)
-    shapes = {
-        name: {"shape": list(np.shape(v)[2:]), "dtype": str(np.asarray(v).dtype)}
-        for name, v in series(problem, Y[None]).items()
-    }
     return {
         "id": task.id,
         "members": [mem.index for mem in task.members],
@@ -193,9 +230,7 @@ def _summary(spec: SweepSpec, task: Task, sol: Solution, problem: Any, Y: Array)
         "message": [reasons.get(j, "") for j in range(m)],
         "run_message": sol.message,
         "drifts": drifts,
-        "state_shape": list(Y.shape[1:]),
-        "state_dtype": str(Y.dtype),
-        "series": shapes,
+        **layout_of(problem, Y),
         "n_saved": int(np.shape(sol.ts)[0]) if sol.ts is not None else None,
         "stats": {
             k: (float(v) if isinstance(v, int | float | np.number) else None)
@@ -206,6 +241,74 @@ def _summary(spec: SweepSpec, task: Task, sol: Solution, problem: Any, Y: Array)
         "pid": os.getpid(),
         "finished_at": time.time(),
     }
+
+
+def sweep_mark(task: Task) -> dict[str, str]:
+    """What a task's result file records (config key ``sweep``) to name its task."""
+    return {"task": task.id, "digest": task.digest}
+
+
+def _done(directory: str | os.PathLike[str], task: Task, log: Path) -> dict[str, Any] | None:
+    """The task's valid summary (result file verified), or ``None`` (an invalid one removed)."""
+    entry = {"id": task.id, "members": [m.index for m in task.members]}
+    try:
+        return read_summary(directory, entry, verify=True)
+    except SweepError as exc:
+        _log(log, f"redoing the task: {exc}")
+        task_paths(directory, task.id).json.unlink(missing_ok=True)
+        return None
+
+
+def _resumed(spec: SweepSpec, task: Task, paths: TaskPaths, problem: Any, method: Any) -> Any:
+    """The task continued from its result file, or ``None`` if that file cannot be continued
+    (no checkpoint, unreadable, or another task's)."""
+    from .. import io
+
+    if not paths.h5.exists():
+        return None
+    try:
+        mark = io.info(paths.h5)["config"].get("sweep")
+        if mark != sweep_mark(task):
+            _log(paths.log, f"{paths.h5.name} is not this task's result file; starting again")
+            return None
+        sol = io.resume(
+            paths.h5,
+            problem=problem,
+            method=method,
+            progress=False,
+            throw=False,
+            chunk_rows=spec.chunk_rows,
+            flush_seconds=spec.flush_seconds,
+        )
+    except (IsoflowError, OSError) as exc:  # no checkpoint, unreadable file
+        _log(paths.log, f"cannot resume ({exc}); starting again")
+        return None
+    _log(paths.log, f"resumed {paths.h5.name}")
+    return sol
+
+
+def _started(spec: SweepSpec, task: Task, paths: TaskPaths) -> tuple[Any, Array, Solution]:
+    """``(problem, Y, solution)`` of the task run from its start (or resumed)."""
+    problem, Y, method, kwargs = build_task(spec, task)
+    sol = _resumed(spec, task, paths, problem, method)
+    if sol is None:
+        _log(paths.log, f"start: {len(task.members)} member(s)")
+        writer = _writer(spec, task, paths.h5)
+        sol = solve(problem, method, Y, progress=False, throw=False, writer=writer, **kwargs)
+    return problem, Y, sol
+
+
+def _writer(spec: SweepSpec, task: Task, path: Path) -> Any:
+    """The result file of a task's run (replacing one that did not resume)."""
+    from .. import io
+
+    return io.HDF5Writer(
+        path,
+        spec.config(task.members[0]) | {"sweep": sweep_mark(task)},
+        chunk_rows=spec.chunk_rows,
+        flush_seconds=spec.flush_seconds,
+        force=True,
+    )
 
 
 def run_task(
@@ -230,14 +333,15 @@ def run_task(
     -------
     dict
         The summary also written to ``tasks/<id>.json`` (per member: status, failed step,
-        message, drifts; the run's statistics).
+        message, drifts; the run's statistics; the size and SHA-256 of the result file; the
+        SHA-256 of the summary itself).
 
     Notes
     -----
-    BLAS and numba run one thread each inside the task. A task whose summary exists is not
-    run again; one whose result file holds a checkpoint is resumed.
+    BLAS and numba run one thread each inside the task. A task with a valid summary whose
+    result file is unchanged is not run again; otherwise a result file of this task with a
+    checkpoint is resumed, and anything else started afresh.
     """
-    from .. import io
     from ..threads import thread_limits
 
     started = time.perf_counter()
@@ -245,46 +349,18 @@ def run_task(
         watch_client(watch_pid)
     task = spec.task_of(task_id)
     paths = task_paths(directory, task.id)
-    done = read_json(paths.json)
-    if done is not None:
-        return dict(done)
     paths.h5.parent.mkdir(parents=True, exist_ok=True)
     with _locked(paths.lock), thread_limits(blas=1, numba=1):
-        done = read_json(paths.json)  # finished by another worker while we waited
+        done = _done(directory, task, paths.log)
         if done is not None:
-            return dict(done)
+            return done
         try:
-            problem, Y, method, kwargs = build_task(spec, task)
-            sol = None
-            if paths.h5.exists():
-                try:
-                    sol = io.resume(
-                        paths.h5,
-                        problem=problem,
-                        method=method,
-                        progress=False,
-                        throw=False,
-                        chunk_rows=spec.chunk_rows,
-                        flush_seconds=spec.flush_seconds,
-                    )
-                    _log(paths.log, f"resumed {paths.h5.name}")
-                except (IsoflowError, OSError) as exc:  # no checkpoint, unreadable file
-                    _log(paths.log, f"cannot resume ({exc}); starting again")
-                    sol = None
-            if sol is None:
-                _log(paths.log, f"start: {len(task.members)} member(s)")
-                writer = io.HDF5Writer(
-                    paths.h5,
-                    spec.config(task.members[0]),
-                    chunk_rows=spec.chunk_rows,
-                    flush_seconds=spec.flush_seconds,
-                    force=True,  # starting again replaces a file that did not resume
-                )
-                sol = solve(
-                    problem, method, Y, progress=False, throw=False, writer=writer, **kwargs
-                )
+            problem, Y, sol = _started(spec, task, paths)
             summary = _summary(spec, task, sol, problem, Y)
             summary["task_seconds"] = time.perf_counter() - started
+            summary["file_size"] = paths.h5.stat().st_size
+            summary["file_sha256"] = file_sha256(paths.h5)
+            summary = seal(summary)
             write_json_atomic(paths.json, summary)
             _log(paths.log, f"done: {sol.message}")
             return summary
