@@ -50,6 +50,7 @@ __all__ = [
     "RUN_FAILED",
     "RUN_FINISHED",
     "RUN_INTERRUPTED",
+    "Restart",
     "RunState",
     "Solution",
     "SolveStats",
@@ -325,9 +326,12 @@ def _check_objects(problem: Any, method: Any, writer: Any = None) -> None:
         )
 
 
-def _check_state(problem: IsospectralProblem, y: ArrayLike, what: str) -> Array:
-    """``y`` validated and projected onto the space, ``B(y)`` checked; no empty ensembles."""
-    W = problem.algebra.validate(y, what)
+def _check_state(
+    problem: IsospectralProblem, y: ArrayLike, what: str, *, project: bool = True
+) -> Array:
+    """``y`` validated (and projected onto the space unless ``project=False``), ``B(y)``
+    checked; no empty ensembles."""
+    W = problem.algebra.validate(y, what, project=project)
     if W.size == 0:
         raise ShapeError(f"{what} is an empty ensemble (shape {W.shape}): nothing to integrate")
     problem.check_B(W)
@@ -486,6 +490,33 @@ def _check_save_every(save_every: Any) -> None:
         raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
 
 
+@dataclass(frozen=True)
+class Restart:
+    """A run to continue, as :func:`check_restart` validated it (the only way to make one that
+    :func:`continue_run` trusts: it does not validate again).
+
+    Attributes
+    ----------
+    problem, method :
+        The run's.
+    state : RunState
+        Where it continues from; ``state.y`` holds exactly the checkpoint's values (checked,
+        not projected: see :func:`check_restart`).
+    t0, dt : float
+        Start time and step.
+    n_steps, save_every : int
+        The run's time grid.
+    """
+
+    problem: IsospectralProblem
+    method: Method
+    state: RunState
+    t0: float
+    dt: float
+    n_steps: int
+    save_every: int
+
+
 def check_restart(
     problem: IsospectralProblem,
     method: Method,
@@ -496,10 +527,13 @@ def check_restart(
     n_steps: int,
     save_every: int,
     writer: StreamWriter | None = None,
-) -> tuple[float, int, RunState]:
+) -> Restart:
     """Validate a restart from ``state`` as :func:`solve` validates a start.
 
-    Returns ``(dt, n_steps, state)`` with the state checked and projected onto the space.
+    The state is checked (the run's space to the tolerance of :func:`solve`, finite, its
+    dtype and shape, ``B`` at it) but **not** projected: the run continues from exactly the
+    state it held, so that it continues bit for bit (a projection is not idempotent in
+    floating point for every space; ``su(n)``'s trace removal is not).
 
     Raises
     ------
@@ -512,46 +546,32 @@ def check_restart(
     _check_save_every(save_every)
     if not 0 <= state.step <= n:
         raise ParameterError(f"checkpoint step {state.step} outside the run's 0..{n} steps")
-    W = _check_state(problem, state.y, "checkpoint state")
+    W = _check_state(problem, state.y, "checkpoint state", project=False)
     M = int(np.prod(problem.algebra.batch_shape(W), dtype=np.int64))
     if state.failures is not None and state.failures.step.shape != (M,):
         raise ShapeError(
             f"checkpoint failure record for {state.failures.step.shape} members, state has {M}"
         )
-    return dt_, n, dataclasses.replace(state, y=W)
+    return Restart(
+        problem, method, dataclasses.replace(state, y=W), float(t0), dt_, n, int(save_every)
+    )
 
 
 def continue_run(
-    problem: IsospectralProblem,
-    method: Method,
-    state: RunState,
+    restart: Restart,
     *,
-    t0: float,
-    dt: float,
-    n_steps: int,
-    save_every: int,
     writer: StreamWriter,
     accumulator: DiagnosticsAccumulator,
     progress: bool | None = None,
     throw: bool = True,
 ) -> Solution:
-    """Continue a run from ``state`` (a checkpoint), appending to ``writer``.
+    """Continue a run validated by :func:`check_restart`, appending to ``writer``.
 
-    The restart goes through the same validation as :func:`solve` (:func:`check_restart`):
-    the time grid, the checkpoint's state (in the space, finite, the run's shape) and ``B`` at
-    it. ``accumulator`` has absorbed the diagnostics of the rows already written.
-
-    Raises
-    ------
-    IsoflowError
-        The state or the time grid do not describe a valid run.
+    ``accumulator`` has absorbed the diagnostics of the rows already written.
     """
-    dt_, n, st = check_restart(
-        problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
-        writer=writer,
-    )  # fmt: skip
+    r = restart
     return _run(
-        problem, method, st, t0=float(t0), dt=dt_, n=n, save_every=int(save_every),
+        r.problem, r.method, r.state, t0=r.t0, dt=r.dt, n=r.n_steps, save_every=r.save_every,
         diagnostics=True, progress=progress, throw=throw, writer=writer, fresh=False,
         accumulator=accumulator,
     )  # fmt: skip

@@ -107,7 +107,8 @@ class Layout:
     restart_at_saves : bool
         The layout's change of variables is not exact in floating point (a frame): the state
         and the offsets are mapped to the user's layout and back at every save point, so that
-        a run restarted from a saved state (a checkpoint) continues it bit for bit.
+        a run restarted from a saved state (a checkpoint) continues it bit for bit. Before the
+        first save point, the runner exports exactly the state and offsets it was given.
     """
 
     name: str
@@ -327,7 +328,13 @@ class CompiledRunner(Runner):
         self.ring = np.zeros((self.M, P, K, S), dtype=self.W.dtype)
         self.head = np.zeros((self.M, P), dtype=np.int64)
         self.nh = np.zeros((self.M, P), dtype=np.int64)
-        self._load_offsets(method_state)
+        self._user: tuple[int, Array, Array] | None = None
+        if layout.restart_at_saves:  # what state() exports before the first save point
+            user = np.zeros((P, K, self.M, *self.core), dtype=self.W.dtype)
+            self._load_offsets(method_state, user)
+            self._user = (self.k, np.array(y, copy=True).reshape(self.M, *self.core), user)
+        else:
+            self._load_offsets(method_state)
         self.rec = np.zeros((self.M, driver.REC_SIZE))
         self.rec[:, driver.REC_FAIL_STEP] = np.where(
             self.failures.step >= 0, self.failures.step + 1, -1
@@ -335,7 +342,6 @@ class CompiledRunner(Runner):
         self.parallel = self.M >= 2 and _threads() > 1 and self._threads_allowed()
         self.compile_seconds = 0.0
         self._drive: Any = None
-        self._user: tuple[int, Array, Array] | None = None
 
     def _threads_allowed(self) -> bool:
         """Members may run on numba threads unless they call a multithreaded BLAS."""
@@ -351,7 +357,9 @@ class CompiledRunner(Runner):
         P = self.gammas.shape[0]
         return _composition._unpack(state, P) if self.composed else [state]
 
-    def _load_offsets(self, state: Any) -> None:
+    def _load_offsets(self, state: Any, user: Array | None = None) -> None:
+        """The ring from the method state's offsets (user's layout); with ``user``
+        (``(P, K, M, *core)``), the given offsets are also kept there, slot by slot."""
         if self.kmax == 0:
             return
         for p, st in enumerate(self._position_states(state)):
@@ -363,6 +371,8 @@ class CompiledRunner(Runner):
             for q, D in enumerate(offsets):  # newest first
                 Dm = np.asarray(D).reshape(self.M, *self.core)
                 self.ring[:, p, (nh - 1 - q)] = self.layout.to_flat(Dm)
+                if user is not None:
+                    user[p, nh - 1 - q] = Dm
             self.head[:, p] = nh - 1
             self.nh[:, p] = nh
 

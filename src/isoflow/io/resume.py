@@ -4,9 +4,11 @@ The order is: take the file's write lock (a live writer gets a clear error); ope
 the file; check sizes before building anything; build the problem and method from the stored
 configuration (:func:`isoflow.registry.build`) or take them as arguments; check them against
 the file (model, time grid, shape, method); validate the restart as :func:`isoflow.solve`
-validates a start; verify every row's checksum; and only then touch the file (rewrite a killed
-or version 1 file, truncate it to the checkpoint) and continue through the time loop's own entry
-(:func:`isoflow._solve.continue_run`). A refusal at any step leaves the file unchanged.
+validates a start (:func:`isoflow._solve.check_restart`: checked, not projected, so that the
+run continues from exactly the state it held); verify every row's checksum; and only then
+touch the file (rewrite a killed or version 1 file, truncate it to the checkpoint) and continue
+through the time loop's own entry (:func:`isoflow._solve.continue_run`). A refusal at any step
+leaves the file unchanged.
 
 The per-step arithmetic, the method state (e.g. IsoMP's warm start) and the step ranges between
 saves are those of the uninterrupted run, so the final state equals an uninterrupted run's bit
@@ -132,7 +134,7 @@ def resume(
             if tuple(np.shape(cp.y)) != tuple(meta["state_shape"]):
                 raise o.fail(f"checkpoint state shape {np.shape(cp.y)} is not the run's")
             state = RunState(cp.step, cp.y, cp.method_state, cp.failures)
-            check_restart(
+            restart = check_restart(
                 problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every
             )
             # every row verified, and the drifts of the rows written accumulated
@@ -153,7 +155,4 @@ def resume(
     finally:
         if not handed_over:
             lock.release()
-    return continue_run(
-        problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
-        writer=writer, accumulator=acc, progress=progress, throw=throw,
-    )  # fmt: skip
+    return continue_run(restart, writer=writer, accumulator=acc, progress=progress, throw=throw)
