@@ -40,6 +40,7 @@ from ._errors import (
     StepSizeError,
     TimeSpanError,
 )
+from ._fingerprint import model_fingerprint
 from ._stepping import FAIL_B_RAISED, MemberFailures, PythonRunner, Runner
 from .diagnostics import Diagnostics, DiagnosticsAccumulator
 from .methods import Method, StepResult
@@ -871,6 +872,7 @@ def _run(
                     "core_shape": list(alg.shape),
                     "state_dtype": np.dtype(alg.dtype).str,
                     "casimir_scale": np.asarray(alg.casimir_scale(W), dtype=float).tolist(),
+                    **({} if memory else {"model_fingerprint": model_fingerprint(problem, W)}),
                 }
             )
         except IsoflowError:

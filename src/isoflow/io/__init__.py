@@ -32,7 +32,7 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from .._errors import ResultFileError, ResultWriteError
+from .._errors import ModelChangedError, ResultFileError, ResultWriteError
 from .._solve import StreamWriter
 from .export import solution_diagnostics, to_netcdf, to_xarray
 from .layout import FORMAT, FORMAT_VERSION
@@ -57,6 +57,7 @@ __all__ = [
     "FORMAT_VERSION",
     "Checkpoint",
     "HDF5Writer",
+    "ModelChangedError",
     "ResultFileError",
     "ResultWriteError",
     "RunData",

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import IsoflowError
+from .._errors import IsoflowError, ModelChangedError
 from .._solve import Solution, solve
 from .files import read_json, task_paths, write_json_atomic
 from .spec import Member, SweepSpec, Task, canonical_json
@@ -268,6 +268,8 @@ def run_task(
                         flush_seconds=spec.flush_seconds,
                     )
                     _log(paths.log, f"resumed {paths.h5.name}")
+                except ModelChangedError:
+                    raise  # the sweep's other tasks ran the recorded model: not started again
                 except (IsoflowError, OSError) as exc:  # no checkpoint, unreadable file
                     _log(paths.log, f"cannot resume ({exc}); starting again")
                     sol = None
