@@ -76,6 +76,18 @@ def raises_when_large(W, out, C, limit):  # type: ignore[no-untyped-def]
             out[i, j] = C[i, j] * W[i, j]
 
 
+def raises_when_large_numpy(C: np.ndarray, limit: float):
+    """:func:`raises_when_large` in NumPy, vectorized: it raises if any member has an entry
+    beyond ``limit``."""
+
+    def B(W):
+        if np.any(np.abs(W) > limit):
+            raise ValueError("entry too large")
+        return C * W
+
+    return B
+
+
 def cubic_problem(alg: iso.algebras.Algebra, seed: int = 0, scale: float = 1.0):
     """A nonlinear ``CompiledB`` problem on a dense space, with the matching NumPy ``B``."""
     rng = np.random.default_rng(seed)

@@ -301,6 +301,28 @@ class PythonRunner(Runner):
         self.Y[0] = y
         self.mstate = st
 
+    def _isolate(self, k: int, alive: NDArray[np.intp], exc: BaseException) -> None:
+        """Step ``k`` of the members ``alive`` raised ``exc``: find the members whose step
+        raises on its own (each stepped alone, the results dropped), fail them with
+        :data:`FAIL_B_RAISED`, and step the others together as if those were not there. If
+        no member raises alone, the step of them all raised: every one of them fails."""
+        raised: dict[int, BaseException] = {}
+        if alive.size > 1:
+            for m in alive:
+                one = np.array([m])
+                _, e = self._step_all(self.Y[one], take_members(self.mstate, one, self.M))
+                if e is not None:
+                    raised[int(m)] = e
+        if not raised:
+            raised = {int(m): exc for m in alive}
+        for m, e in raised.items():
+            self.failures.record(m, k, FAIL_B_RAISED, 0, float("nan"))
+            self.failures.messages[m] = f"{type(e).__name__}: {e}"
+        self.last_exception = next(iter(raised.values()))
+        rest = np.setdiff1d(alive, np.fromiter(raised, dtype=np.int64))
+        if rest.size:
+            self._one_step(k, rest)
+
     def _one_step(self, k: int, alive: NDArray[np.intp]) -> None:
         """Step ``k`` (from ``t0 + k h``) of the members ``alive``."""
         everyone = alive.size == self.M
@@ -312,11 +334,7 @@ class PythonRunner(Runner):
             y, st = self.Y[alive], take_members(self.mstate, alive, self.M)
         res, exc = self._step_all(y, st)
         if exc is not None:
-            msg = f"{type(exc).__name__}: {exc}"
-            for m in alive:
-                self.failures.record(int(m), k, FAIL_B_RAISED, 0, float("nan"))
-                self.failures.messages[int(m)] = msg
-            self.last_exception = exc
+            self._isolate(k, alive, exc)
             return
         n = alive.size
         if res.status is None:

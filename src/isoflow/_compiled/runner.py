@@ -29,9 +29,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._stepping import MemberFailures, Runner
+from .._errors import IsoflowError
+from .._stepping import FAIL_B_RAISED, MemberFailures, Runner
 from ..algebras import Hermitian, SL2Vectors, SpecialOrthogonal, SpinVectors, Symmetric, Unitary
-from ..kernels import ElementwiseLinear, PairwiseVortex, SpinNeighbourSum
+from ..kernels import CompiledB, ElementwiseLinear, PairwiseVortex, SpinNeighbourSum
 from ..methods import Composition, IsoMP, Method, SphericalMidpoint
 from ..methods import composition as _composition
 from ..methods.isomp import extrapolation_weights
@@ -310,6 +311,7 @@ class CompiledRunner(Runner):
         self.h = float(h)
         self.k = int(k)
         self.failures = failures if failures is not None else MemberFailures.none(self.M)
+        self.kernel = problem.kernel
         field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
@@ -407,19 +409,21 @@ class CompiledRunner(Runner):
         return y.reshape(*self.batch, *self.core), self._export_offsets()
 
     # ---- running -----------------------------------------------------------------------------
-    def _driver(self) -> Any:
+    def _driver(self, parallel: bool | None = None) -> Any:
         """The compiled driver of this run (compiled, or loaded from numba's cache, once per
-        process for each field, argument types and stage: later runs reuse it at once)."""
+        process for each field, argument types, stage and ``parallel``, by default the run's:
+        later runs reuse it at once)."""
         from .signatures import compiled_driver, stage_types
 
+        parallel = self.parallel if parallel is None else parallel
         L = self.layout
         key = (self.f, _type_key(self.fargs), L.iterate, L.finish, _type_key(L.sp),
-               self.W.dtype.str, self.parallel)  # fmt: skip
+               self.W.dtype.str, parallel)  # fmt: skip
         drive = _DRIVERS.get(key)
         if drive is None:
             st = stage_types(self.f, self.fargs, L.sp, self.W.dtype)
             st.compile_stage(L.iterate, L.finish)
-            drive = _DRIVERS[key] = compiled_driver(st.driver_signature(), self.parallel)
+            drive = _DRIVERS[key] = compiled_driver(st.driver_signature(), parallel)
         return drive
 
     #: Checkpoints of this runner must fall on save points (see :attr:`Layout.restart_at_saves`).
@@ -468,6 +472,7 @@ class CompiledRunner(Runner):
         rec[:, driver.REC_ITERATIONS] = 0.0
         rec[:, driver.REC_ITERATIONS_MAX] = 0.0
         rec[:, driver.REC_RESIDUAL_MAX] = 0.0
+        rec[:, driver.REC_CALL_DONE] = 0.0
         if self.layout.identity and out.flags.c_contiguous:
             return out.reshape(R, self.M, self.S)
         return np.empty((R, self.M, self.S), self.W.dtype)
@@ -497,12 +502,14 @@ class CompiledRunner(Runner):
             from .notice import compile_notice
 
             start = time.perf_counter()
-            with compile_notice(what):
-                drive = make_drive()
-                with numba.parallel_chunksize(chunk):
-                    drive(*args)
-            self._drive = drive
-            self.compile_seconds = time.perf_counter() - start
+            try:
+                with compile_notice(what):
+                    drive = make_drive()
+                    self._drive = drive  # compiled: a raise from here on is the field's
+                    with numba.parallel_chunksize(chunk):
+                        drive(*args)
+            finally:
+                self.compile_seconds = time.perf_counter() - start
         else:
             with numba.parallel_chunksize(chunk):
                 self._drive(*args)
@@ -514,20 +521,113 @@ class CompiledRunner(Runner):
             out[...] = self.layout.from_flat(buf)
         self._absorb(nsteps)
 
-    def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
-        L = self.layout
-        buf = self._rows_buffer(out)
-        s = self.solver
-        rec = self.rec
-        args = (
+    def _args(
+        self, members: slice, nsteps: int, k0: int, save_every: int, k_final: int, rows: Array
+    ) -> tuple[Any, ...]:
+        """The driver's arguments for the ``members`` (views of this runner's arrays) and
+        ``nsteps`` steps from step ``k0``, their saved rows going into ``rows``."""
+        L, s = self.layout, self.solver
+        return (
             L.iterate, L.finish, self.f, self.fargs, L.sp, L.nwork,
-            self.W, self.ring, self.head, self.nh, self.coefs, self.kmax, self.gammas,
-            self.h, int(nsteps), self.k, int(save_every), int(k_final), buf,
+            self.W[members], self.ring[members], self.head[members], self.nh[members],
+            self.coefs, self.kmax, self.gammas,
+            self.h, int(nsteps), int(k0), int(save_every), int(k_final), rows,
             float(s.rtol), float(s.atol), float(s.stall_rtol), float(s.divergence_factor),
-            int(s.max_iter), int(s.anderson), ANDERSON_REGULARIZATION, rec,
+            int(s.max_iter), int(s.anderson), ANDERSON_REGULARIZATION, self.rec[members],
         )  # fmt: skip
-        self._call(self._driver, args, f"{L.name} with {getattr(self.f, '__name__', 'B')}")
+
+    def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+        buf = self._rows_buffer(out)
+        everyone = slice(None)
+        args = self._args(everyone, nsteps, self.k, save_every, k_final, buf)
+        what = f"{self.layout.name} with {getattr(self.f, '__name__', 'B')}"
+        before = self._arrays(everyone) if self.may_raise else None
+        raised: Exception | None = None
+        try:
+            self._call(self._driver, args, what)
+        except Exception as exc:  # the field raised (a parallel driver says SystemError)
+            if before is None or self._drive is None:
+                raise
+            raised = exc
+        undone = np.flatnonzero(self.rec[:, driver.REC_CALL_DONE] == 0.0)
+        if undone.size and before is not None:  # their field raised: redo them, alone
+            for m in undone:
+                self._set_arrays(slice(m, m + 1), tuple(a[m : m + 1] for a in before))
+            self._isolate(undone, nsteps, save_every, k_final, buf)
+        elif undone.size or raised is not None:
+            raise IsoflowError(
+                f"the compiled loop stopped {undone.size} member(s) in the middle of a chunk "
+                f"without a result ({raised!r}); the run cannot go on"
+            ) from raised
         self._finish(out, buf, nsteps)
+
+    # ---- a field that raises: only the members whose B raises fail ---------------------------
+    @property
+    def may_raise(self) -> bool:
+        """Whether the field is the user's (:class:`~isoflow.CompiledB`), which may raise: a
+        chunk then keeps a copy of the arrays it changes, to redo the members after a raise."""
+        return isinstance(self.kernel, CompiledB)
+
+    def _arrays(self, members: slice) -> tuple[Array, ...]:
+        """Copies of what a call changes for the ``members``."""
+        return tuple(a[members].copy() for a in (self.W, self.ring, self.head, self.nh, self.rec))
+
+    def _set_arrays(self, members: slice, saved: tuple[Array, ...]) -> None:
+        for a, b in zip((self.W, self.ring, self.head, self.nh, self.rec), saved, strict=True):
+            a[members] = b
+
+    def _isolate(
+        self, members: NDArray[np.intp], nsteps: int, save_every: int, k_final: int, buf: Array
+    ) -> None:
+        """Redo the chunk of the ``members`` whose call did not return, one by one (serially,
+        each from its state before the call: the members' steps are independent, so every
+        result equals a run without the raising members, bit for bit); a member whose ``B``
+        raises is redone step by step and frozen at its last good state with
+        :data:`FAIL_B_RAISED` at the step that raised."""
+        drive = self._driver(parallel=False)
+        rows = np.empty((buf.shape[0], 1, self.S), dtype=self.W.dtype)
+        for m in members:
+            one = slice(m, m + 1)
+            saved = self._arrays(one)
+            try:
+                drive(*self._args(one, nsteps, self.k, save_every, k_final, rows))
+            except Exception:
+                self._set_arrays(one, saved)
+                self._step_until_raise(m, drive, nsteps, save_every, k_final, buf)
+            else:
+                buf[:, m] = rows[:, 0]
+
+    def _step_until_raise(
+        self, m: int, drive: Any, nsteps: int, save_every: int, k_final: int, buf: Array
+    ) -> None:
+        """Member ``m``'s chunk one step per call until its field raises (see
+        :meth:`_isolate`); its remaining rows repeat its last good state."""
+        one = slice(m, m + 1)
+        row = 0
+        for k0 in range(self.k, self.k + nsteps):
+            saves = 1 if (k0 + 1) % save_every == 0 or k0 + 1 == k_final else 0
+            rows = np.empty((saves, 1, self.S), dtype=self.W.dtype)
+            saved = self._arrays(one)
+            try:
+                drive(*self._args(one, 1, k0, save_every, k_final, rows))
+            except Exception as exc:
+                self._set_arrays(one, saved)
+                self._fail_raised(m, k0, exc)
+                buf[row:, m] = self.W[m]
+                return
+            buf[row : row + saves, m] = rows[:, 0]
+            row += saves
+
+    def _fail_raised(self, m: int, k0: int, exc: Exception) -> None:
+        """Record that member ``m``'s field raised ``exc`` in the step from step ``k0``."""
+        rec = self.rec[m]
+        rec[driver.REC_FAIL_STEP] = k0 + 1  # the driver counts steps from 1
+        rec[driver.REC_FAIL_STATUS] = FAIL_B_RAISED
+        rec[driver.REC_FAIL_ITERATIONS] = 0
+        rec[driver.REC_FAIL_RESIDUAL] = np.nan
+        self.failures.messages[m] = f"{type(exc).__name__}: {exc}"
+        if self.last_exception is None:
+            self.last_exception = exc
 
     def _absorb(self, nsteps: int) -> None:
         rec = self.rec
