@@ -34,6 +34,7 @@ from ._errors import (
     ConvergenceError,
     IsoflowError,
     NonFiniteError,
+    NotInSpaceError,
     ParameterError,
     ResultWriteError,
     ShapeError,
@@ -41,7 +42,14 @@ from ._errors import (
     TimeSpanError,
 )
 from ._fingerprint import model_fingerprint
-from ._stepping import FAIL_B_RAISED, MemberFailures, PythonRunner, Runner
+from ._stepping import (
+    FAIL_B_RAISED,
+    FAIL_LEFT_SPACE,
+    MemberFailures,
+    PythonRunner,
+    Runner,
+    stop_members_leaving_the_space,
+)
 from .diagnostics import Diagnostics, DiagnosticsAccumulator
 from .methods import Method, StepResult
 from .nonlinear import STATUS_CONVERGED, STATUS_NON_FINITE
@@ -703,6 +711,11 @@ def _failure_message(method: Method, fails: MemberFailures, batch: tuple[int, ..
         code = int(fails.status[m])
         if code == FAIL_B_RAISED:
             return f"{method.name}: at step {k} (t = {t:.6g}) {fails.reason(m)}"
+        if code == FAIL_LEFT_SPACE:
+            return (
+                f"{method.name}: {fails.reason(m)}; the run stops at the last saved state "
+                f"where B was in the normalizer, after step {k} (t = {t:.6g})"
+            )
         if code == STATUS_NON_FINITE and fails.iterations[m] <= 1:
             return f"{method.name}: the state became non-finite at step {k} (t = {t:.6g})"
         return (
@@ -895,6 +908,7 @@ def _run(
     calls = 0
     reported = runner.failures.failed.size
     failure_exc: Exception | None = None
+    last_good = (k0, np.array(W, copy=True).reshape(M, *alg.shape))  # the last checked state
     try:
         if fresh:  # inside the try: a failure here closes the writer (no temporary files left)
             emit(np.array([t0]), W[None].copy())
@@ -925,12 +939,17 @@ def _run(
                     per_step = rate if per_step is None else 0.5 * (per_step + rate)
                 elif calls == 1:
                     nsteps_next = 4
+                ks = _save_points(k_before, runner.k, save_every, n)
+                if ks.size:  # members whose B at a saved state left the normalizer fail
+                    last_good = stop_members_leaving_the_space(
+                        problem, runner, out[: ks.size], ks, last_good
+                    )
                 done = _save_steps(k_before, runner.k, save_every, n)
                 if done:
-                    ks = _save_points(k_before, runner.k, save_every, n)
+                    ks = ks[:done]
                     emit(t0 + ks * dt, out[:done].reshape(done, *W.shape))
                     rows_since += done
-                bar.update(runner.k - k_before)
+                bar.update(max(runner.k - k_before, 0))
                 now = time.monotonic()
                 newly = runner.failures.failed.size > reported
                 finished = runner.k >= n or not runner.failures.alive.any()
@@ -1044,10 +1063,12 @@ def _convergence_error(message: str, runner: Runner, t0: float, dt: float) -> Ex
     m = int(fails.failed[np.argmin(fails.step[fails.failed])])
     k = int(fails.step[m])
     code = int(fails.status[m])
+    cause = runner.exceptions.get(m)
+    if code == FAIL_LEFT_SPACE and isinstance(cause, NotInSpaceError):
+        return NotInSpaceError(message, distance=cause.distance, tolerance=cause.tolerance)
     if code == FAIL_B_RAISED:
         exc: Exception = IsoflowError(message)
-        if runner.last_exception is not None:
-            exc.__cause__ = runner.last_exception
+        exc.__cause__ = cause
         return exc
     if code == STATUS_NON_FINITE and fails.iterations[m] <= 1 and fails.residual[m] == 0:
         return NonFiniteError(message)

@@ -312,6 +312,7 @@ class CompiledRunner(Runner):
         self.k = int(k)
         self.failures = failures if failures is not None else MemberFailures.none(self.M)
         self.kernel = problem.kernel
+        self.algebra = alg
         field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
@@ -407,6 +408,26 @@ class CompiledRunner(Runner):
         else:
             y = np.array(self.layout.from_flat(self.W), copy=True)
         return y.reshape(*self.batch, *self.core), self._export_offsets()
+
+    def B_at(self, rows: Array) -> Array:
+        return self.kernel.evaluate(rows, self.algebra)  # type: ignore[union-attr]
+
+    def freeze(self, m: int, step: int, y: Array, status: int, message: str) -> None:
+        self.W[m] = self.layout.to_flat(np.asarray(y).reshape(1, *self.core))[0]
+        if self._user is not None:
+            self._user[1][m] = y
+        self._mark_failed(m, step, status)
+        self.failures.record(m, step, status, 0, float("nan"))
+        self.failures.messages[m] = message
+
+    def _mark_failed(self, m: int, step: int, status: int) -> None:
+        """Member ``m``'s record: failed with ``status`` in the step from step ``step`` (the
+        driver keeps it frozen from now on)."""
+        rec = self.rec[m]
+        rec[driver.REC_FAIL_STEP] = step + 1  # the driver counts steps from 1
+        rec[driver.REC_FAIL_STATUS] = status
+        rec[driver.REC_FAIL_ITERATIONS] = 0
+        rec[driver.REC_FAIL_RESIDUAL] = np.nan
 
     # ---- running -----------------------------------------------------------------------------
     def _driver(self, parallel: bool | None = None) -> Any:
@@ -620,14 +641,9 @@ class CompiledRunner(Runner):
 
     def _fail_raised(self, m: int, k0: int, exc: Exception) -> None:
         """Record that member ``m``'s field raised ``exc`` in the step from step ``k0``."""
-        rec = self.rec[m]
-        rec[driver.REC_FAIL_STEP] = k0 + 1  # the driver counts steps from 1
-        rec[driver.REC_FAIL_STATUS] = FAIL_B_RAISED
-        rec[driver.REC_FAIL_ITERATIONS] = 0
-        rec[driver.REC_FAIL_RESIDUAL] = np.nan
+        self._mark_failed(m, k0, FAIL_B_RAISED)
         self.failures.messages[m] = f"{type(exc).__name__}: {exc}"
-        if self.last_exception is None:
-            self.last_exception = exc
+        self.exceptions[m] = exc
 
     def _absorb(self, nsteps: int) -> None:
         rec = self.rec
@@ -711,6 +727,11 @@ class BlockedRunner(CompiledRunner):
         self._sync()
         super()._round_trip()
         self._blocks_from_members()
+
+    def freeze(self, m: int, step: int, y: Array, status: int, message: str) -> None:
+        super().freeze(m, step, y, status, message)
+        b, lane = divmod(m, blocked.LANES)  # the member's lane of its block (to_blocks)
+        self.Wb[b, :, :, lane] = self.W[m].reshape(self.n, self.n)
 
     def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
         L = self.layout
