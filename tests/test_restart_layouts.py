@@ -96,7 +96,6 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
     "point vortices (sphere), spherical midpoint": (_vortices, iso.SphericalMidpoint),
     "point vortices (hyperbolic)": (lambda: iso.models.hyperbolic_vortices(1), iso.IsoMP),
     "su(6) NumPy": (lambda: _euler(6, kernel=False), iso.IsoMP),
-    "su(6) NumPy, Newton": (lambda: _euler(6), lambda: iso.IsoMP(solver=iso.Newton())),
 }
 
 N_STEPS, SAVE_EVERY = 36, 2
