@@ -43,6 +43,7 @@ from .flat import anderson, copy, guess, push
 from .rules import CONTINUE, STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE, stopping_step
 
 __all__ = [
+    "REC_CALL_DONE",
     "REC_FAIL_ITERATIONS",
     "REC_FAIL_RESIDUAL",
     "REC_FAIL_STATUS",
@@ -70,7 +71,11 @@ REC_ITERATIONS = 4
 REC_ITERATIONS_MAX = 5
 #: Largest final residual of an accepted solve in the call.
 REC_RESIDUAL_MAX = 6
-REC_SIZE = 7
+#: Set to 1 when the member's call returns (the caller clears it before the call): a member
+#: whose field raised has 0, also where a parallel driver loses the exception (numba does not
+#: propagate an exception raised on a worker thread).
+REC_CALL_DONE = 7
+REC_SIZE = 8
 
 
 @numba.njit(cache=True)
@@ -97,6 +102,7 @@ def run_member(  # type: ignore[no-untyped-def]
             if k % save_every == 0 or k == k_final:
                 copy(out[row], W)
                 row += 1
+        rec[REC_CALL_DONE] = 1.0
         return 0
     X = np.empty(S, dtype=dt)
     G = np.empty(S, dtype=dt)
@@ -191,6 +197,7 @@ def run_member(  # type: ignore[no-untyped-def]
     rec[REC_ITERATIONS] += it_tot
     rec[REC_ITERATIONS_MAX] = max(rec[REC_ITERATIONS_MAX], it_max)
     rec[REC_RESIDUAL_MAX] = max(rec[REC_RESIDUAL_MAX], res_max)
+    rec[REC_CALL_DONE] = 1.0
     return taken
 
 

@@ -28,9 +28,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._stepping import MemberFailures, Runner
+from .._errors import IsoflowError
+from .._stepping import FAIL_B_RAISED, MemberFailures, Runner
 from ..algebras import Hermitian, SL2Vectors, SpecialOrthogonal, SpinVectors, Symmetric, Unitary
-from ..kernels import ElementwiseLinear, PairwiseVortex, SpinNeighbourSum
+from ..kernels import CompiledB, ElementwiseLinear, PairwiseVortex, SpinNeighbourSum
 from ..methods import Composition, IsoMP, Method, SphericalMidpoint
 from ..methods import composition as _composition
 from ..methods.isomp import extrapolation_weights
@@ -106,7 +107,8 @@ class Layout:
     restart_at_saves : bool
         The layout's change of variables is not exact in floating point (a frame): the state
         and the offsets are mapped to the user's layout and back at every save point, so that
-        a run restarted from a saved state (a checkpoint) continues it bit for bit.
+        a run restarted from a saved state (a checkpoint) continues it bit for bit. Before the
+        first save point, the runner exports exactly the state and offsets it was given.
     """
 
     name: str
@@ -308,6 +310,8 @@ class CompiledRunner(Runner):
         self.h = float(h)
         self.k = int(k)
         self.failures = failures if failures is not None else MemberFailures.none(self.M)
+        self.kernel = problem.kernel
+        self.algebra = alg
         field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
@@ -326,14 +330,19 @@ class CompiledRunner(Runner):
         self.ring = np.zeros((self.M, P, K, S), dtype=self.W.dtype)
         self.head = np.zeros((self.M, P), dtype=np.int64)
         self.nh = np.zeros((self.M, P), dtype=np.int64)
-        self._load_offsets(method_state)
+        self._user: tuple[int, Array, Array] | None = None
+        if layout.restart_at_saves:  # what state() exports before the first save point
+            user = np.zeros((P, K, self.M, *self.core), dtype=self.W.dtype)
+            self._load_offsets(method_state, user)
+            self._user = (self.k, np.array(y, copy=True).reshape(self.M, *self.core), user)
+        else:
+            self._load_offsets(method_state)
         self.rec = np.zeros((self.M, driver.REC_SIZE))
         self.rec[:, driver.REC_FAIL_STEP] = np.where(
             self.failures.step >= 0, self.failures.step + 1, -1
         )
         self.parallel = self.M >= 2 and _threads() > 1 and self._threads_allowed()
         self._drive: Any = None
-        self._user: tuple[int, Array, Array] | None = None
 
     def _threads_allowed(self) -> bool:
         """Members may run on numba threads unless they call a multithreaded BLAS."""
@@ -349,7 +358,9 @@ class CompiledRunner(Runner):
         P = self.gammas.shape[0]
         return _composition._unpack(state, P) if self.composed else [state]
 
-    def _load_offsets(self, state: Any) -> None:
+    def _load_offsets(self, state: Any, user: Array | None = None) -> None:
+        """The ring from the method state's offsets (user's layout); with ``user``
+        (``(P, K, M, *core)``), the given offsets are also kept there, slot by slot."""
         if self.kmax == 0:
             return
         for p, st in enumerate(self._position_states(state)):
@@ -361,6 +372,8 @@ class CompiledRunner(Runner):
             for q, D in enumerate(offsets):  # newest first
                 Dm = np.asarray(D).reshape(self.M, *self.core)
                 self.ring[:, p, (nh - 1 - q)] = self.layout.to_flat(Dm)
+                if user is not None:
+                    user[p, nh - 1 - q] = Dm
             self.head[:, p] = nh - 1
             self.nh[:, p] = nh
 
@@ -394,20 +407,42 @@ class CompiledRunner(Runner):
             y = np.array(self.layout.from_flat(self.W), copy=True)
         return y.reshape(*self.batch, *self.core), self._export_offsets()
 
+    def B_at(self, rows: Array) -> Array:
+        return self.kernel.evaluate(rows, self.algebra)  # type: ignore[union-attr]
+
+    def freeze(self, m: int, step: int, y: Array, status: int, message: str) -> None:
+        self.W[m] = self.layout.to_flat(np.asarray(y).reshape(1, *self.core))[0]
+        if self._user is not None:
+            self._user[1][m] = y
+        self._mark_failed(m, step, status)
+        self.failures.record(m, step, status, 0, float("nan"))
+        self.failures.messages[m] = message
+
+    def _mark_failed(self, m: int, step: int, status: int) -> None:
+        """Member ``m``'s record: failed with ``status`` in the step from step ``step`` (the
+        driver keeps it frozen from now on)."""
+        rec = self.rec[m]
+        rec[driver.REC_FAIL_STEP] = step + 1  # the driver counts steps from 1
+        rec[driver.REC_FAIL_STATUS] = status
+        rec[driver.REC_FAIL_ITERATIONS] = 0
+        rec[driver.REC_FAIL_RESIDUAL] = np.nan
+
     # ---- running -----------------------------------------------------------------------------
-    def _driver(self) -> Any:
+    def _driver(self, parallel: bool | None = None) -> Any:
         """The compiled driver of this run (compiled, or loaded from numba's cache, once per
-        process for each field, argument types and stage: later runs reuse it at once)."""
+        process for each field, argument types, stage and ``parallel``, by default the run's:
+        later runs reuse it at once)."""
         from .signatures import compiled_driver, stage_types
 
+        parallel = self.parallel if parallel is None else parallel
         L = self.layout
         key = (self.f, _type_key(self.fargs), L.iterate, L.finish, _type_key(L.sp),
-               self.W.dtype.str, self.parallel)  # fmt: skip
+               self.W.dtype.str, parallel)  # fmt: skip
         drive = _DRIVERS.get(key)
         if drive is None:
             st = stage_types(self.f, self.fargs, L.sp, self.W.dtype)
             st.compile_stage(L.iterate, L.finish)
-            drive = _DRIVERS[key] = compiled_driver(st.driver_signature(), self.parallel)
+            drive = _DRIVERS[key] = compiled_driver(st.driver_signature(), parallel)
         return drive
 
     #: Checkpoints of this runner must fall on save points (see :attr:`Layout.restart_at_saves`).
@@ -456,6 +491,7 @@ class CompiledRunner(Runner):
         rec[:, driver.REC_ITERATIONS] = 0.0
         rec[:, driver.REC_ITERATIONS_MAX] = 0.0
         rec[:, driver.REC_RESIDUAL_MAX] = 0.0
+        rec[:, driver.REC_CALL_DONE] = 0.0
         if self.layout.identity and out.flags.c_contiguous:
             return out.reshape(R, self.M, self.S)
         return np.empty((R, self.M, self.S), self.W.dtype)
@@ -487,9 +523,9 @@ class CompiledRunner(Runner):
 
             with compile_notice(f"the compiled loop for {what}"):
                 drive = make_drive()
+                self._drive = drive  # compiled: a raise from here on is the field's
                 with numba.parallel_chunksize(chunk):
                     drive(*args)
-            self._drive = drive
         else:
             with numba.parallel_chunksize(chunk):
                 self._drive(*args)
@@ -501,20 +537,108 @@ class CompiledRunner(Runner):
             out[...] = self.layout.from_flat(buf)
         self._absorb(nsteps)
 
-    def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
-        L = self.layout
-        buf = self._rows_buffer(out)
-        s = self.solver
-        rec = self.rec
-        args = (
+    def _args(
+        self, members: slice, nsteps: int, k0: int, save_every: int, k_final: int, rows: Array
+    ) -> tuple[Any, ...]:
+        """The driver's arguments for the ``members`` (views of this runner's arrays) and
+        ``nsteps`` steps from step ``k0``, their saved rows going into ``rows``."""
+        L, s = self.layout, self.solver
+        return (
             L.iterate, L.finish, self.f, self.fargs, L.sp, L.nwork,
-            self.W, self.ring, self.head, self.nh, self.coefs, self.kmax, self.gammas,
-            self.h, int(nsteps), self.k, int(save_every), int(k_final), buf,
+            self.W[members], self.ring[members], self.head[members], self.nh[members],
+            self.coefs, self.kmax, self.gammas,
+            self.h, int(nsteps), int(k0), int(save_every), int(k_final), rows,
             float(s.rtol), float(s.atol), float(s.stall_rtol), float(s.divergence_factor),
-            int(s.max_iter), int(s.anderson), ANDERSON_REGULARIZATION, rec,
+            int(s.max_iter), int(s.anderson), ANDERSON_REGULARIZATION, self.rec[members],
         )  # fmt: skip
-        self._call(self._driver, args, f"{L.name} with {getattr(self.f, '__name__', 'B')}")
+
+    def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+        buf = self._rows_buffer(out)
+        everyone = slice(None)
+        args = self._args(everyone, nsteps, self.k, save_every, k_final, buf)
+        what = f"{self.layout.name} with {getattr(self.f, '__name__', 'B')}"
+        before = self._arrays(everyone) if self.may_raise else None
+        raised: Exception | None = None
+        try:
+            self._call(self._driver, args, what)
+        except Exception as exc:  # the field raised (a parallel driver says SystemError)
+            if before is None or self._drive is None:
+                raise
+            raised = exc
+        undone = np.flatnonzero(self.rec[:, driver.REC_CALL_DONE] == 0.0)
+        if undone.size and before is not None:  # their field raised: redo them, alone
+            for m in undone:
+                self._set_arrays(slice(m, m + 1), tuple(a[m : m + 1] for a in before))
+            self._isolate(undone, nsteps, save_every, k_final, buf)
+        elif undone.size or raised is not None:
+            raise IsoflowError(
+                f"the compiled loop stopped {undone.size} member(s) in the middle of a chunk "
+                f"without a result ({raised!r}); the run cannot go on"
+            ) from raised
         self._finish(out, buf, nsteps)
+
+    # ---- a field that raises: only the members whose B raises fail ---------------------------
+    @property
+    def may_raise(self) -> bool:
+        """Whether the field is the user's (:class:`~isoflow.CompiledB`), which may raise: a
+        chunk then keeps a copy of the arrays it changes, to redo the members after a raise."""
+        return isinstance(self.kernel, CompiledB)
+
+    def _arrays(self, members: slice) -> tuple[Array, ...]:
+        """Copies of what a call changes for the ``members``."""
+        return tuple(a[members].copy() for a in (self.W, self.ring, self.head, self.nh, self.rec))
+
+    def _set_arrays(self, members: slice, saved: tuple[Array, ...]) -> None:
+        for a, b in zip((self.W, self.ring, self.head, self.nh, self.rec), saved, strict=True):
+            a[members] = b
+
+    def _isolate(
+        self, members: NDArray[np.intp], nsteps: int, save_every: int, k_final: int, buf: Array
+    ) -> None:
+        """Redo the chunk of the ``members`` whose call did not return, one by one (serially,
+        each from its state before the call: the members' steps are independent, so every
+        result equals a run without the raising members, bit for bit); a member whose ``B``
+        raises is redone step by step and frozen at its last good state with
+        :data:`FAIL_B_RAISED` at the step that raised."""
+        drive = self._driver(parallel=False)
+        rows = np.empty((buf.shape[0], 1, self.S), dtype=self.W.dtype)
+        for m in members:
+            one = slice(m, m + 1)
+            saved = self._arrays(one)
+            try:
+                drive(*self._args(one, nsteps, self.k, save_every, k_final, rows))
+            except Exception:
+                self._set_arrays(one, saved)
+                self._step_until_raise(m, drive, nsteps, save_every, k_final, buf)
+            else:
+                buf[:, m] = rows[:, 0]
+
+    def _step_until_raise(
+        self, m: int, drive: Any, nsteps: int, save_every: int, k_final: int, buf: Array
+    ) -> None:
+        """Member ``m``'s chunk one step per call until its field raises (see
+        :meth:`_isolate`); its remaining rows repeat its last good state."""
+        one = slice(m, m + 1)
+        row = 0
+        for k0 in range(self.k, self.k + nsteps):
+            saves = 1 if (k0 + 1) % save_every == 0 or k0 + 1 == k_final else 0
+            rows = np.empty((saves, 1, self.S), dtype=self.W.dtype)
+            saved = self._arrays(one)
+            try:
+                drive(*self._args(one, 1, k0, save_every, k_final, rows))
+            except Exception as exc:
+                self._set_arrays(one, saved)
+                self._fail_raised(m, k0, exc)
+                buf[row:, m] = self.W[m]
+                return
+            buf[row : row + saves, m] = rows[:, 0]
+            row += saves
+
+    def _fail_raised(self, m: int, k0: int, exc: Exception) -> None:
+        """Record that member ``m``'s field raised ``exc`` in the step from step ``k0``."""
+        self._mark_failed(m, k0, FAIL_B_RAISED)
+        self.failures.messages[m] = f"{type(exc).__name__}: {exc}"
+        self.exceptions[m] = exc
 
     def _absorb(self, nsteps: int) -> None:
         rec = self.rec
@@ -598,6 +722,11 @@ class BlockedRunner(CompiledRunner):
         self._sync()
         super()._round_trip()
         self._blocks_from_members()
+
+    def freeze(self, m: int, step: int, y: Array, status: int, message: str) -> None:
+        super().freeze(m, step, y, status, message)
+        b, lane = divmod(m, blocked.LANES)  # the member's lane of its block (to_blocks)
+        self.Wb[b, :, :, lane] = self.W[m].reshape(self.n, self.n)
 
     def _advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
         L = self.layout
