@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -245,3 +248,49 @@ def assert_same_run(a: RunResult, b: RunResult, iters_exact: bool = True) -> Non
             x, y = x[alive], y[alive]
         if x.size:
             assert np.max(np.abs(x - y)) <= FAST_TOL * scale
+
+
+@contextmanager
+def disk_before_each_write(path: Path) -> Iterator[list[bytes]]:
+    """Keep the bytes of the result file ``path`` before every write to it once it is published
+    (the disk a SIGKILL at that write leaves), in the order of the writes."""
+    from isoflow.io import safefile
+
+    copies: list[bytes] = []
+
+    def hook(sf: Any, offset: int, data: bytes) -> None:
+        fd = sf.fileno()
+        if path.exists() and os.path.samestat(os.fstat(fd), path.stat()):
+            copies.append(os.pread(fd, os.fstat(fd).st_size, 0))
+
+    safefile.write_hook = hook
+    try:
+        yield copies
+    finally:
+        safefile.write_hook = None
+
+
+#: A user's model module: ``factory(n, seed)`` of a rigid body on so(n) with a Python ``B``.
+USER_MODEL_SOURCE = '''
+import numpy as np
+import isoflow as iso
+
+
+def factory(n=4, seed=0):
+    """A rigid body on so(n) with a Python B (NumPy path)."""
+    d = 1.0 + np.arange(n) / n
+    C = 0.5 * (d[:, None] + d[None, :])
+
+    def B(W):
+        return {factor}C * W
+
+    alg = iso.algebras.so(n)
+    problem = iso.IsospectralProblem(B=B, algebra=alg, name="toy")
+    return problem, alg.random(seed=seed, scale=0.5)
+'''
+
+
+def write_user_model(directory: Path, name: str, factor: str = "-", comment: str = "") -> None:
+    """The user's module ``directory/name.py`` (:data:`USER_MODEL_SOURCE`) with
+    ``B = {factor}C * W`` and a trailing ``comment``."""
+    (directory / f"{name}.py").write_text(USER_MODEL_SOURCE.format(factor=factor) + comment)

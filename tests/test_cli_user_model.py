@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cli_helpers import isoflow_cmd, kill_when, one_error_line, run_cli, user_env
+from helpers import disk_before_each_write, write_user_model
 from isoflow import cli, io, registry
 
 TOY = "user_models:toy_rigid_body"
@@ -57,6 +58,32 @@ def test_user_model_streams_and_resumes_bit_for_bit_when_named_again(tmp_path: P
     assert got.complete and got.run_info["status"] == 0
     assert got.ys.tobytes() == ref.ys.tobytes() and np.array_equal(got.ts, ref.ts)
     assert got.drifts == ref.drifts
+
+
+def test_resume_of_a_changed_user_model_is_refused_unless_forced(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    write_user_model(tmp_path, "cli_fp")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    with disk_before_each_write(full) as copies:
+        code = cli.main(["run", "--model", "cli_fp:factory", "--dt", "0.01", "--n-steps", "60",
+                         "--save-every", "2", "--chunk-rows", "2", "--flush-seconds", "1e-9",
+                         "--out", str(full), "--quiet"])  # fmt: skip
+    assert code == 0
+    part.write_bytes(copies[len(copies) // 2])  # killed in the middle
+    before = part.read_bytes()
+    write_user_model(tmp_path, "cli_fp", factor="-2.0 * ")  # the user edits B
+    env = {**user_env(), "PYTHONPATH": str(tmp_path)}
+    res = run_cli("run", "--resume", str(part), "--model", "cli_fp:factory", env=env)
+    line = one_error_line(res.stderr)
+    assert res.returncode == 1 and "the model changed since the run started" in line
+    assert "B differs at the probe state" in line and "--force" in line
+    assert part.read_bytes() == before
+    res = run_cli("run", "--resume", str(part), "--model", "cli_fp:factory", "--force", "--quiet",
+                  env=env)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert io.load(part).complete
 
 
 def test_user_compiled_model_from_toml(tmp_path: Path) -> None:

@@ -317,7 +317,7 @@ def test_non_finite_state_fails_like_numpy() -> None:
     assert a.failures.step[0] == 0 and a.k == 0
 
 
-def test_user_function_that_raises_reaches_the_caller() -> None:
+def test_user_function_that_raises_fails_the_run_with_it_as_cause() -> None:
     alg = iso.algebras.so(5)
     d = np.arange(1.0, 6.0)
     C = 0.5 * (d[:, None] + d[None, :])
@@ -326,8 +326,15 @@ def test_user_function_that_raises_reaches_the_caller() -> None:
     prob = iso.IsospectralProblem(
         B=lambda W: C * W, algebra=alg, kernel=iso.CompiledB(uk.raises_when_large, (C, 0.31))
     )
-    with pytest.raises(ValueError, match="entry too large"):
+    with pytest.raises(iso.IsoflowError, match="B raised: ValueError: entry too large") as err:
         iso.solve(prob, IsoMP(), W0, dt=0.1, n_steps=500)
+    assert isinstance(err.value.__cause__, ValueError)  # as on the NumPy path
+    sol = iso.solve(prob, IsoMP(), W0, dt=0.1, n_steps=500, throw=False)
+    k = int(sol.failed_step)
+    assert 0 < k < 500 and sol.stats.n_steps == k and len(sol.ys) == k + 1
+    assert sol.failure_reasons == {(): "B raised: ValueError: entry too large"}
+    plain = iso.solve(dataclasses.replace(prob, kernel=None), IsoMP(), W0, dt=0.1, n_steps=k)
+    assert np.allclose(sol.ys, plain.ys, rtol=0, atol=1e-12)  # the run up to the raise
 
 
 def test_compiled_b_is_checked() -> None:

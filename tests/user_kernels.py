@@ -76,6 +76,43 @@ def raises_when_large(W, out, C, limit):  # type: ignore[no-untyped-def]
             out[i, j] = C[i, j] * W[i, j]
 
 
+def raises_when_large_numpy(C: np.ndarray, limit: float):
+    """:func:`raises_when_large` in NumPy, vectorized: it raises if any member has an entry
+    beyond ``limit``."""
+
+    def B(W):
+        if np.any(np.abs(W) > limit):
+            raise ValueError("entry too large")
+        return C * W
+
+    return B
+
+
+@numba.njit(cache=True)
+def leaves_when_large(W, out, C, limit):  # type: ignore[no-untyped-def]
+    """``C * W``, plus ``0.1 diag(0, 1, ..., n - 1)`` (symmetric: outside the skew normalizer)
+    once an entry exceeds ``limit``: a user's ``B`` that leaves the normalizer mid-run."""
+    n = W.shape[0]
+    large = False
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = C[i, j] * W[i, j]
+            large = large or abs(W[i, j]) > limit
+    if large:
+        for i in range(n):
+            out[i, i] += 0.1 * i
+
+
+def leaves_when_large_numpy(C: np.ndarray, limit: float):
+    """:func:`leaves_when_large` in NumPy, member by member over leading axes."""
+
+    def B(W):
+        large = np.abs(W).max(axis=(-2, -1)) > limit
+        return C * W + 0.1 * large[..., None, None] * np.diag(np.arange(W.shape[-1]))
+
+    return B
+
+
 def cubic_problem(alg: iso.algebras.Algebra, seed: int = 0, scale: float = 1.0):
     """A nonlinear ``CompiledB`` problem on a dense space, with the matching NumPy ``B``."""
     rng = np.random.default_rng(seed)

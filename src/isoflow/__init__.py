@@ -26,6 +26,7 @@ from ._errors import ConvergenceError as ConvergenceError
 from ._errors import DtypeError as DtypeError
 from ._errors import InvalidBError as InvalidBError
 from ._errors import IsoflowError as IsoflowError
+from ._errors import ModelChangedError as ModelChangedError
 from ._errors import NonFiniteError as NonFiniteError
 from ._errors import NotInSpaceError as NotInSpaceError
 from ._errors import ParameterError as ParameterError
@@ -113,6 +114,7 @@ __all__ = [
     "IsospectralProblem",
     "Kernel",
     "Method",
+    "ModelChangedError",
     "Newton",
     "NonFiniteError",
     "NotInSpaceError",

@@ -12,6 +12,7 @@ __all__ = [
     "DtypeError",
     "InvalidBError",
     "IsoflowError",
+    "ModelChangedError",
     "NonFiniteError",
     "NotInSpaceError",
     "ParameterError",
@@ -79,6 +80,24 @@ class ResultFileError(IsoflowError, OSError):
     Missing, not HDF5, not ours, truncated, damaged (a checksum does not match), crafted (a
     field out of range), locked by a live writer, or not a regular file where one is replaced.
     """
+
+
+class ModelChangedError(ResultFileError):
+    """A resume found another model than the one the result file's run started with.
+
+    The model's ``B`` (or a function of its diagnostics) differs at the fingerprint's probe
+    state, or the source of the user code defining it changed; resuming would mix two flows
+    in one file. ``force=True`` (``isoflow run --resume FILE --force``) resumes anyway.
+
+    Attributes
+    ----------
+    changes : list of str
+        What differs, in words.
+    """
+
+    def __init__(self, message: str, *, changes: list[str]) -> None:
+        super().__init__(message)
+        self.changes = changes
 
 
 class ResultWriteError(IsoflowError, OSError):

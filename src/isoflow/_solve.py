@@ -35,13 +35,22 @@ from ._errors import (
     ConvergenceError,
     IsoflowError,
     NonFiniteError,
+    NotInSpaceError,
     ParameterError,
     ResultWriteError,
     ShapeError,
     StepSizeError,
     TimeSpanError,
 )
-from ._stepping import FAIL_B_RAISED, MemberFailures, PythonRunner, Runner
+from ._fingerprint import model_fingerprint
+from ._stepping import (
+    FAIL_B_RAISED,
+    FAIL_LEFT_SPACE,
+    MemberFailures,
+    PythonRunner,
+    Runner,
+    stop_members_leaving_the_space,
+)
 from .diagnostics import Diagnostics, DiagnosticsAccumulator
 from .methods import Method, StepResult
 from .nonlinear import STATUS_CONVERGED, STATUS_NON_FINITE
@@ -51,6 +60,7 @@ __all__ = [
     "RUN_FAILED",
     "RUN_FINISHED",
     "RUN_INTERRUPTED",
+    "Restart",
     "RunState",
     "Solution",
     "SolveStats",
@@ -328,9 +338,12 @@ def _check_objects(problem: Any, method: Any, writer: Any = None) -> None:
         )
 
 
-def _check_state(problem: IsospectralProblem, y: ArrayLike, what: str) -> Array:
-    """``y`` validated and projected onto the space, ``B(y)`` checked; no empty ensembles."""
-    W = problem.algebra.validate(y, what)
+def _check_state(
+    problem: IsospectralProblem, y: ArrayLike, what: str, *, project: bool = True
+) -> Array:
+    """``y`` validated (and projected onto the space unless ``project=False``), ``B(y)``
+    checked; no empty ensembles."""
+    W = problem.algebra.validate(y, what, project=project)
     if W.size == 0:
         raise ShapeError(f"{what} is an empty ensemble (shape {W.shape}): nothing to integrate")
     problem.check_B(W)
@@ -492,6 +505,33 @@ def _check_save_every(save_every: Any) -> None:
         raise ParameterError(f"save_every must be a positive integer, got {save_every!r}")
 
 
+@dataclass(frozen=True)
+class Restart:
+    """A run to continue, as :func:`check_restart` validated it (the only way to make one that
+    :func:`continue_run` trusts: it does not validate again).
+
+    Attributes
+    ----------
+    problem, method :
+        The run's.
+    state : RunState
+        Where it continues from; ``state.y`` holds exactly the checkpoint's values (checked,
+        not projected: see :func:`check_restart`).
+    t0, dt : float
+        Start time and step.
+    n_steps, save_every : int
+        The run's time grid.
+    """
+
+    problem: IsospectralProblem
+    method: Method
+    state: RunState
+    t0: float
+    dt: float
+    n_steps: int
+    save_every: int
+
+
 def check_restart(
     problem: IsospectralProblem,
     method: Method,
@@ -502,10 +542,13 @@ def check_restart(
     n_steps: int,
     save_every: int,
     writer: StreamWriter | None = None,
-) -> tuple[float, int, RunState]:
+) -> Restart:
     """Validate a restart from ``state`` as :func:`solve` validates a start.
 
-    Returns ``(dt, n_steps, state)`` with the state checked and projected onto the space.
+    The state is checked (the run's space to the tolerance of :func:`solve`, finite, its
+    dtype and shape, ``B`` at it) but **not** projected: the run continues from exactly the
+    state it held, so that it continues bit for bit (a projection is not idempotent in
+    floating point for every space; ``su(n)``'s trace removal is not).
 
     Raises
     ------
@@ -518,49 +561,35 @@ def check_restart(
     _check_save_every(save_every)
     if not 0 <= state.step <= n:
         raise ParameterError(f"checkpoint step {state.step} outside the run's 0..{n} steps")
-    W = _check_state(problem, state.y, "checkpoint state")
+    W = _check_state(problem, state.y, "checkpoint state", project=False)
     M = int(np.prod(problem.algebra.batch_shape(W), dtype=np.int64))
     if state.failures is not None and state.failures.step.shape != (M,):
         raise ShapeError(
             f"checkpoint failure record for {state.failures.step.shape} members, state has {M}"
         )
-    return dt_, n, dataclasses.replace(state, y=W)
+    return Restart(
+        problem, method, dataclasses.replace(state, y=W), float(t0), dt_, n, int(save_every)
+    )
 
 
 def continue_run(
-    problem: IsospectralProblem,
-    method: Method,
-    state: RunState,
+    restart: Restart,
     *,
-    t0: float,
-    dt: float,
-    n_steps: int,
-    save_every: int,
     writer: StreamWriter,
     accumulator: DiagnosticsAccumulator,
     progress: bool | None = None,
     throw: bool = True,
 ) -> Solution:
-    """Continue a run from ``state`` (a checkpoint), appending to ``writer``.
+    """Continue a run validated by :func:`check_restart`, appending to ``writer``.
 
-    The restart goes through the same validation as :func:`solve` (:func:`check_restart`):
-    the time grid, the checkpoint's state (in the space, finite, the run's shape) and ``B`` at
-    it. ``accumulator`` has absorbed the diagnostics of the rows already written.
-
-    Raises
-    ------
-    IsoflowError
-        The state or the time grid do not describe a valid run.
+    ``accumulator`` has absorbed the diagnostics of the rows already written.
     """
+    r = restart
     with compile_clock(show=progress is not False) as clock:
-        dt_, n, st = check_restart(
-            problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
-            writer=writer,
-        )  # fmt: skip
         return _run(
-            problem, method, st, t0=float(t0), dt=dt_, n=n, save_every=int(save_every),
-            diagnostics=True, progress=progress, throw=throw, writer=writer, fresh=False,
-            accumulator=accumulator, clock=clock,
+            r.problem, r.method, r.state, t0=r.t0, dt=r.dt, n=r.n_steps,
+            save_every=r.save_every, diagnostics=True, progress=progress, throw=throw,
+            writer=writer, fresh=False, accumulator=accumulator, clock=clock,
         )  # fmt: skip
 
 
@@ -689,6 +718,11 @@ def _failure_message(method: Method, fails: MemberFailures, batch: tuple[int, ..
         code = int(fails.status[m])
         if code == FAIL_B_RAISED:
             return f"{method.name}: at step {k} (t = {t:.6g}) {fails.reason(m)}"
+        if code == FAIL_LEFT_SPACE:
+            return (
+                f"{method.name}: {fails.reason(m)}; the run stops at the last saved state "
+                f"where B was in the normalizer, after step {k} (t = {t:.6g})"
+            )
         if code == STATUS_NON_FINITE and fails.iterations[m] <= 1:
             return f"{method.name}: the state became non-finite at step {k} (t = {t:.6g})"
         return (
@@ -859,6 +893,7 @@ def _run(
                     "core_shape": list(alg.shape),
                     "state_dtype": np.dtype(alg.dtype).str,
                     "casimir_scale": np.asarray(alg.casimir_scale(W), dtype=float).tolist(),
+                    **({} if memory else {"model_fingerprint": model_fingerprint(problem, W)}),
                 }
             )
         except IsoflowError:
@@ -881,6 +916,7 @@ def _run(
     calls = 0
     reported = runner.failures.failed.size
     failure_exc: Exception | None = None
+    last_good = (k0, np.array(W, copy=True).reshape(M, *alg.shape))  # the last checked state
     try:
         if fresh:  # inside the try: a failure here closes the writer (no temporary files left)
             emit(np.array([t0]), W[None].copy())
@@ -911,12 +947,17 @@ def _run(
                     per_step = rate if per_step is None else 0.5 * (per_step + rate)
                 elif calls == 1:
                     nsteps_next = 4
+                ks = _save_points(k_before, runner.k, save_every, n)
+                if ks.size:  # members whose B at a saved state left the normalizer fail
+                    last_good = stop_members_leaving_the_space(
+                        problem, runner, out[: ks.size], ks, last_good
+                    )
                 done = _save_steps(k_before, runner.k, save_every, n)
                 if done:
-                    ks = _save_points(k_before, runner.k, save_every, n)
+                    ks = ks[:done]
                     emit(t0 + ks * dt, out[:done].reshape(done, *W.shape))
                     rows_since += done
-                bar.update(runner.k - k_before)
+                bar.update(max(runner.k - k_before, 0))
                 now = time.monotonic()
                 newly = runner.failures.failed.size > reported
                 finished = runner.k >= n or not runner.failures.alive.any()
@@ -1030,10 +1071,12 @@ def _convergence_error(message: str, runner: Runner, t0: float, dt: float) -> Ex
     m = int(fails.failed[np.argmin(fails.step[fails.failed])])
     k = int(fails.step[m])
     code = int(fails.status[m])
+    cause = runner.exceptions.get(m)
+    if code == FAIL_LEFT_SPACE and isinstance(cause, NotInSpaceError):
+        return NotInSpaceError(message, distance=cause.distance, tolerance=cause.tolerance)
     if code == FAIL_B_RAISED:
         exc: Exception = IsoflowError(message)
-        if runner.last_exception is not None:
-            exc.__cause__ = runner.last_exception
+        exc.__cause__ = cause
         return exc
     if code == STATUS_NON_FINITE and fails.iterations[m] <= 1 and fails.residual[m] == 0:
         return NonFiniteError(message)

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._errors import NotInSpaceError
 from .methods import Method
 from .nonlinear import STATUS_CONVERGED, STATUS_NAMES, STATUS_NON_FINITE
 from .problems import IsospectralProblem
@@ -33,10 +34,14 @@ from .problems import IsospectralProblem
 __all__ = [
     "FAILURE_NAMES",
     "FAIL_B_RAISED",
+    "FAIL_LEFT_SPACE",
+    "LEFT_SPACE_ATOL",
+    "LEFT_SPACE_RTOL",
     "MemberFailures",
     "PythonRunner",
     "Runner",
     "merge_members",
+    "stop_members_leaving_the_space",
     "take_members",
 ]
 
@@ -44,8 +49,16 @@ Array = NDArray[Any]
 
 #: Failure code of a member whose ``B`` raised an exception (beside the solver's codes).
 FAIL_B_RAISED = 4
-#: Names of the failure codes of a member (the nonlinear solver's and :data:`FAIL_B_RAISED`).
-FAILURE_NAMES = {**STATUS_NAMES, FAIL_B_RAISED: "B raised"}
+#: Failure code of a member whose flow leaves the space: ``B`` at a saved state is farther from
+#: the normalizer than :data:`LEFT_SPACE_ATOL` ``+`` :data:`LEFT_SPACE_RTOL` ``* norm``.
+FAIL_LEFT_SPACE = 5
+#: Names of the failure codes of a member (the nonlinear solver's and the above).
+FAILURE_NAMES = {**STATUS_NAMES, FAIL_B_RAISED: "B raised", FAIL_LEFT_SPACE: "left the space"}
+#: Relative distance of ``B`` from the normalizer at a saved state beyond which its member fails
+#: (far above rounding, the tolerance of the check of ``B`` when a run starts).
+LEFT_SPACE_RTOL = 1e-8
+#: Absolute part of that tolerance.
+LEFT_SPACE_ATOL = 1e-12
 
 
 @dataclass
@@ -115,8 +128,11 @@ class Runner:
     k : int
         Steps completed since ``t0``. Failed members are frozen while the others go on; once
         every member has failed, the run ends where the last one failed.
-    last_exception : BaseException or None
-        The exception ``B`` raised, when a member failed with :data:`FAIL_B_RAISED`.
+    exceptions : dict of int to BaseException
+        Per failed member (flattened index), the exception that failed it where there is one:
+        what its ``B`` raised (:data:`FAIL_B_RAISED`), or the
+        :class:`~isoflow.NotInSpaceError` of a ``B`` that left the normalizer
+        (:data:`FAIL_LEFT_SPACE`).
     failures : MemberFailures
     iterations_total, iterations_max : int
         Nonlinear iterations summed over steps and members; the largest for one step.
@@ -133,7 +149,7 @@ class Runner:
     label: str = "runner"
 
     def __init__(self) -> None:
-        self.last_exception: BaseException | None = None
+        self.exceptions: dict[int, BaseException] = {}
         self.iterations_total = 0
         self.iterations_max = 0
         self.residual_max = 0.0
@@ -147,6 +163,16 @@ class Runner:
     def state(self) -> tuple[Array, Any]:
         """The current state ``(*batch, *core)`` and the method state (members flattened:
         per-member arrays ``(M, ...)``, or the member's own shape for one system)."""
+        raise NotImplementedError  # pragma: no cover
+
+    def freeze(self, m: int, step: int, y: Array, status: int, message: str) -> None:
+        """Fail member ``m`` from outside the steps (a check of its saved states): it is
+        frozen at ``y`` (``core`` shape), its state after ``step`` steps."""
+        raise NotImplementedError  # pragma: no cover
+
+    def B_at(self, rows: Array) -> Array:
+        """``B`` as the steps evaluate it (the Python ``B``, or the compiled kernel), at the
+        states ``rows`` ``(R, m, *core)`` of ``m`` members (uncounted)."""
         raise NotImplementedError  # pragma: no cover
 
 
@@ -225,6 +251,7 @@ class PythonRunner(Runner):
         self.M = int(np.prod(self.batch, dtype=np.int64))
         self.counter = _CountingB(problem.B, alg.core_ndim)
         self.problem = dataclasses.replace(problem, B=self.counter)
+        self.uncounted = problem
         self.method = method
         self.h = float(h)
         self.Y = np.array(y, dtype=alg.dtype, copy=True).reshape(self.M, *self.core)
@@ -242,6 +269,17 @@ class PythonRunner(Runner):
 
     def state(self) -> tuple[Array, Any]:
         return self.Y.reshape(*self.batch, *self.core), self.mstate
+
+    def B_at(self, rows: Array) -> Array:
+        B = self.uncounted.evaluate_B
+        if self.single:  # B as the steps call it: one state, or the members stacked
+            return np.stack([B(r[0])[None] for r in rows])
+        return np.stack([B(r) for r in rows])
+
+    def freeze(self, m: int, step: int, y: Array, status: int, message: str) -> None:
+        self.Y[m] = y
+        self.failures.record(m, step, status, 0, float("nan"))
+        self.failures.messages[m] = message
 
     def _step_all(self, y: Array, st: Any) -> tuple[Any, BaseException | None]:
         try:
@@ -279,7 +317,7 @@ class PythonRunner(Runner):
             except Exception as exc:  # B (or the user's code under it) raised
                 self.failures.record(0, k, FAIL_B_RAISED, 0, float("nan"))
                 self.failures.messages[0] = f"{type(exc).__name__}: {exc}"
-                self.last_exception = exc
+                self.exceptions[0] = exc
                 break
             its = 0 if res.iterations is None else int(res.iterations)
             code = STATUS_CONVERGED if res.status is None else int(res.status)
@@ -301,6 +339,28 @@ class PythonRunner(Runner):
         self.Y[0] = y
         self.mstate = st
 
+    def _isolate(self, k: int, alive: NDArray[np.intp], exc: BaseException) -> None:
+        """Step ``k`` of the members ``alive`` raised ``exc``: find the members whose step
+        raises on its own (each stepped alone, the results dropped), fail them with
+        :data:`FAIL_B_RAISED`, and step the others together as if those were not there. If
+        no member raises alone, the step of them all raised: every one of them fails."""
+        raised: dict[int, BaseException] = {}
+        if alive.size > 1:
+            for m in alive:
+                one = np.array([m])
+                _, e = self._step_all(self.Y[one], take_members(self.mstate, one, self.M))
+                if e is not None:
+                    raised[int(m)] = e
+        if not raised:
+            raised = {int(m): exc for m in alive}
+        for m, e in raised.items():
+            self.failures.record(m, k, FAIL_B_RAISED, 0, float("nan"))
+            self.failures.messages[m] = f"{type(e).__name__}: {e}"
+            self.exceptions[m] = e
+        rest = np.setdiff1d(alive, np.fromiter(raised, dtype=np.int64))
+        if rest.size:
+            self._one_step(k, rest)
+
     def _one_step(self, k: int, alive: NDArray[np.intp]) -> None:
         """Step ``k`` (from ``t0 + k h``) of the members ``alive``."""
         everyone = alive.size == self.M
@@ -312,11 +372,7 @@ class PythonRunner(Runner):
             y, st = self.Y[alive], take_members(self.mstate, alive, self.M)
         res, exc = self._step_all(y, st)
         if exc is not None:
-            msg = f"{type(exc).__name__}: {exc}"
-            for m in alive:
-                self.failures.record(int(m), k, FAIL_B_RAISED, 0, float("nan"))
-                self.failures.messages[int(m)] = msg
-            self.last_exception = exc
+            self._isolate(k, alive, exc)
             return
         n = alive.size
         if res.status is None:
@@ -356,3 +412,62 @@ class PythonRunner(Runner):
         self.Y[good] = ynew[ok]
         sub = take_members(res.state, np.flatnonzero(ok), n)
         self.mstate = merge_members(self.mstate, good, sub, self.M)
+
+
+def _b_off_the_normalizer(
+    problem: IsospectralProblem, runner: Runner, rows: Array
+) -> tuple[Array, Array, Array]:
+    """Per saved row and alive member (``(R, M)``): whether ``B`` at the state (as the steps
+    evaluate it) is farther from the normalizer than ``LEFT_SPACE_ATOL + LEFT_SPACE_RTOL *
+    norm``, the distance and the tolerance. A ``B`` that raises or is not finite here is
+    left to the steps, which fail the member for it."""
+    R, M = rows.shape[:2]
+    off = np.zeros((R, M), dtype=bool)
+    dist, tol = np.zeros((R, M)), np.zeros((R, M))
+    alive = np.flatnonzero(runner.failures.alive)
+    N = problem.algebra.normalizer
+    members = slice(None) if alive.size == M else alive  # no copy while all are alive
+    try:
+        with np.errstate(all="ignore"):
+            B = np.asarray(runner.B_at(rows[:, members]), dtype=N.dtype)
+    except Exception:  # the steps report a B that raises (FAIL_B_RAISED)
+        return off, dist, tol
+    dist[:, members] = N.distance(B)
+    tol[:, members] = LEFT_SPACE_ATOL + LEFT_SPACE_RTOL * N.norm(B)
+    off[:, members] = dist[:, members] > tol[:, members]
+    return off, dist, tol
+
+
+def stop_members_leaving_the_space(
+    problem: IsospectralProblem, runner: Runner, rows: Array, ks: Array,
+    last_good: tuple[int, Array],
+) -> tuple[int, Array]:  # fmt: skip
+    """Fail the members of a chunk whose ``B`` at a saved state (``rows``, ``(R, M, *core)``,
+    at steps ``ks``) is not in the normalizer: the flow from there leaves the space.
+
+    (Every method ends its steps in the space, by a projection: such a ``B`` shows in the
+    lost invariants, not in the states, so ``B`` is what is checked.) Such a member is
+    frozen with :data:`FAIL_LEFT_SPACE` at its last saved state where ``B`` passed: the
+    previous row, or ``last_good`` (``(step, states)`` from before the chunk); its rows from
+    the first bad one on repeat that state. If no member is left, the run ends there.
+    Returns the new ``last_good``: the chunk's last row (after the freezes).
+    """
+    alg = problem.algebra
+    off, dist, tol = _b_off_the_normalizer(problem, runner, rows)
+    for m in np.flatnonzero(off.any(axis=0)):
+        j = int(np.argmax(off[:, m]))
+        step, good = (int(ks[j - 1]), rows[j - 1, m]) if j else (last_good[0], last_good[1][m])
+        good = np.array(good, copy=True)
+        rows[j:, m] = good
+        message = (
+            f"B(W) after step {int(ks[j])} is at distance {dist[j, m]:.1e} from the "
+            f"normalizer {alg.normalizer.name} (beyond {tol[j, m]:.1e}), so the flow "
+            f"W' = [B(W), W] leaves {alg.name}"
+        )
+        runner.freeze(int(m), step, good, FAIL_LEFT_SPACE, message)
+        runner.exceptions[int(m)] = NotInSpaceError(
+            message, distance=float(dist[j, m]), tolerance=float(tol[j, m])
+        )
+    if off.any() and not runner.failures.alive.any():
+        runner.k = int(runner.failures.step.max())  # every member failed: the run ends there
+    return int(ks[-1]), np.array(rows[-1], copy=True)

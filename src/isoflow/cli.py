@@ -181,7 +181,12 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", metavar="TOML", help="read the run from a TOML file")
     run.add_argument("--resume", metavar="FILE", help="continue a stopped or killed run")
     run.add_argument("--out", metavar="FILE", help="result file (HDF5) to write")
-    run.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    run.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite an existing --out file; with --resume: continue although the model "
+        "changed since the run started",
+    )
     run.add_argument("--method", help="a method of 'isoflow list methods' (default isomp)")
     run.add_argument("--solver", help=f"one of: {solvers} (default fixed-point)")
     run.add_argument("--rtol", type=_positive_float, help="nonlinear solver tolerance")
@@ -467,8 +472,6 @@ def _resume(args: argparse.Namespace) -> int:
 
     extra = [k for k in ("config", "out", *_RUN_OPTIONS) if getattr(args, k) not in (None, False)]
     extra += [k for k in vars(args) if k.startswith("param_") and getattr(args, k) is not None]
-    if args.force:
-        extra.append("force")
     if extra:
         flags = ", ".join("--" + k.removeprefix("param_").replace("_", "-") for k in extra)
         raise UserError(
@@ -480,6 +483,7 @@ def _resume(args: argparse.Namespace) -> int:
         "throw": False,
         "chunk_rows": args.chunk_rows,
         "flush_seconds": args.flush_seconds,
+        "force": args.force,
     }
     sweep_note = _sweep_task_note(args.resume, io.info(args.resume)["config"])
     if sweep_note is not None:

@@ -44,6 +44,7 @@ from .flat import anderson, copy, guess, push
 from .rules import CONTINUE, STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE, stopping_step
 
 __all__ = [
+    "REC_CALL_DONE",
     "REC_FAIL_ITERATIONS",
     "REC_FAIL_RESIDUAL",
     "REC_FAIL_STATUS",
@@ -71,7 +72,11 @@ REC_ITERATIONS = 4
 REC_ITERATIONS_MAX = 5
 #: Largest final residual of an accepted solve in the call.
 REC_RESIDUAL_MAX = 6
-REC_SIZE = 7
+#: Set to 1 when the member's call returns (the caller clears it before the call): a member
+#: whose field raised has 0, also where a parallel driver loses the exception (numba does not
+#: propagate an exception raised on a worker thread).
+REC_CALL_DONE = 7
+REC_SIZE = 8
 
 
 @numba.njit(cache=True, inline="always")
@@ -116,6 +121,8 @@ def run_unit(  # type: ignore[no-untyped-def]
             if k % every == 0 or k == k_final:
                 blocks.store(lay, out, row, m0, nv, W)
                 row += 1
+        for q in range(nv):
+            rec[m0 + q, REC_CALL_DONE] = 1.0
         return
     X = np.empty(S, dtype=dt)
     G = np.empty(S, dtype=dt)
@@ -263,6 +270,7 @@ def run_unit(  # type: ignore[no-untyped-def]
         rec[m, REC_ITERATIONS] += it_tot[q]
         rec[m, REC_ITERATIONS_MAX] = max(rec[m, REC_ITERATIONS_MAX], it_max[q])
         rec[m, REC_RESIDUAL_MAX] = max(rec[m, REC_RESIDUAL_MAX], res_max[q])
+        rec[m, REC_CALL_DONE] = 1.0
 
 
 # The drivers are compiled per run signature by :func:`isoflow._compiled.signatures.

@@ -22,8 +22,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._errors import IsoflowError
 from .._save_grid import SaveGrid
-from .._stepping import MemberFailures, Runner
+from .._stepping import FAIL_B_RAISED, MemberFailures, Runner
+from ..kernels import CompiledB
 from ..methods import Composition, Method
 from ..methods import composition as _composition
 from ..methods.isomp import extrapolation_weights
@@ -43,6 +45,7 @@ from .vortices import vortex_layout
 __all__ = ["CompiledRunner", "compiled_runner", "layout_for"]
 
 Array = NDArray[Any]
+
 
 def _threads() -> int:
     import numba
@@ -130,6 +133,8 @@ class CompiledRunner(Runner):
         self.h = float(h)
         self.k = int(k)
         self.failures = failures if failures is not None else MemberFailures.none(self.M)
+        self.kernel = problem.kernel
+        self.algebra = alg
         field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
@@ -149,7 +154,13 @@ class CompiledRunner(Runner):
         self.ring = np.zeros((self.U, P, K, S), dtype=self.W.dtype)
         self.head = np.zeros((self.U, P), dtype=np.int64)
         self.nh = np.zeros((self.U, P), dtype=np.int64)
-        self._load_offsets(method_state)
+        self._user: tuple[int, Array, Array] | None = None
+        if layout.restart_at_saves:  # what state() exports before the first save point
+            user = np.zeros((P, K, self.M, *self.core), dtype=self.W.dtype)
+            self._load_offsets(method_state, user)
+            self._user = (self.k, np.array(y, copy=True).reshape(self.M, *self.core), user)
+        else:
+            self._load_offsets(method_state)
         self.rec = np.zeros((self.M, driver.REC_SIZE))
         self.rec[:, driver.REC_FAIL_STEP] = np.where(
             self.failures.step >= 0, self.failures.step + 1, -1
@@ -157,7 +168,6 @@ class CompiledRunner(Runner):
         self.begin = impl.begin if impl.begin is not None else no_begin
         self.parallel = self.U >= 2 and _threads() > 1 and self._threads_allowed()
         self._drive: Any = None
-        self._user: tuple[int, Array, Array] | None = None
 
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS."""
@@ -178,7 +188,9 @@ class CompiledRunner(Runner):
         P = self.gammas.shape[0]
         return _composition._unpack(state, P) if self.composed else [state]
 
-    def _load_offsets(self, state: Any) -> None:
+    def _load_offsets(self, state: Any, user: Array | None = None) -> None:
+        """The ring from the method state's offsets (user's layout); with ``user``
+        (``(P, K, M, *core)``), the given offsets are also kept there, slot by slot."""
         if self.kmax == 0:
             return
         for p, st in enumerate(self._position_states(state)):
@@ -190,6 +202,8 @@ class CompiledRunner(Runner):
             for q, D in enumerate(offsets):  # newest first
                 Dm = np.asarray(D).reshape(self.M, *self.core)
                 self.ring[:, p, (nh - 1 - q)] = self.layout.to_units(Dm)
+                if user is not None:
+                    user[p, nh - 1 - q] = Dm
             self.head[:, p] = nh - 1
             self.nh[:, p] = nh
 
@@ -226,15 +240,43 @@ class CompiledRunner(Runner):
             y = np.array(self.layout.from_units(self.W), copy=True)
         return y.reshape(*self.batch, *self.core), self._export_offsets()
 
+    def B_at(self, rows: Array) -> Array:
+        return self.kernel.evaluate(rows, self.algebra)  # type: ignore[union-attr]
+
+    def freeze(self, m: int, step: int, y: Array, status: int, message: str) -> None:
+        y = np.asarray(y).reshape(1, *self.core)
+        if self.layout.lanes == 1:
+            self.W[m] = self.layout.to_units(y)[0]
+        else:  # the member's lane of its unit (the lanes' map is a permutation: exact)
+            members = np.array(self.layout.from_units(self.W), copy=True)
+            members[m] = y[0]
+            self.W[...] = self.layout.to_units(members)
+        if self._user is not None:
+            self._user[1][m] = y[0]
+        self._mark_failed(m, step, status)
+        self.failures.record(m, step, status, 0, float("nan"))
+        self.failures.messages[m] = message
+
+    def _mark_failed(self, m: int, step: int, status: int) -> None:
+        """Member ``m``'s record: failed with ``status`` in the step from step ``step`` (the
+        driver keeps it frozen from now on)."""
+        rec = self.rec[m]
+        rec[driver.REC_FAIL_STEP] = step + 1  # the driver counts steps from 1
+        rec[driver.REC_FAIL_STATUS] = status
+        rec[driver.REC_FAIL_ITERATIONS] = 0
+        rec[driver.REC_FAIL_RESIDUAL] = np.nan
+
     # ---- running -----------------------------------------------------------------------------
-    def _driver(self, args: tuple[Any, ...]) -> Any:
-        """The compiled driver of this run: the stage compiled for the run's types and the
-        driver for its signature (compiled, or loaded from numba's cache, once per process
-        and signature: :func:`~isoflow._compiled.signatures.compiled_driver`)."""
+    def _driver(self, args: tuple[Any, ...], parallel: bool | None = None) -> Any:
+        """The compiled driver of this run (by default with the run's ``parallel``): the stage
+        compiled for the run's types and the driver for its signature (compiled, or loaded
+        from numba's cache, once per process and signature:
+        :func:`~isoflow._compiled.signatures.compiled_driver`)."""
         impl = self.impl
         dt = DriverTypes(self.f, self.fargs, self.layout.record, self.mp, self.W.dtype)
         dt.compile_stage(self.begin, impl.iterate, impl.finish)
-        return compiled_driver(dt.driver_signature(args), self.parallel)
+        par = self.parallel if parallel is None else parallel
+        return compiled_driver(dt.driver_signature(args), par)
 
     def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
         grid = SaveGrid(save_every, k_final)
@@ -277,6 +319,7 @@ class CompiledRunner(Runner):
         rec[:, driver.REC_ITERATIONS] = 0.0
         rec[:, driver.REC_ITERATIONS_MAX] = 0.0
         rec[:, driver.REC_RESIDUAL_MAX] = 0.0
+        rec[:, driver.REC_CALL_DONE] = 0.0
         if self.layout.identity and out.flags.c_contiguous:
             return out.reshape(R, self.M, self.S)
         return np.empty((R, self.M, self.member_size), self.W.dtype)
@@ -290,6 +333,10 @@ class CompiledRunner(Runner):
         result."""
         return max(1, self.U // (16 * _threads()))
 
+    def _head(self) -> tuple[Any, ...]:
+        """The driver's first arguments: the stage's functions and the field."""
+        return (self.begin, self.impl.iterate, self.impl.finish, self.f, self.fargs)
+
     def _call(self, args: tuple[Any, ...]) -> None:
         """Run the compiled driver on ``args``; the first call gets it from :meth:`_driver`
         and compiles it (or loads it from numba's cache; a compilation is announced), later
@@ -297,13 +344,14 @@ class CompiledRunner(Runner):
         import numba
 
         chunk = self._chunk if self.parallel else 0  # 0: numba's static split
-        head = (self.begin, self.impl.iterate, self.impl.finish, self.f, self.fargs)
+        head = self._head()
         if self._drive is None:
             from .._compile_clock import compile_notice
 
             what = f"{self.layout.name} with {getattr(self.f, '__name__', 'B')}"
             with compile_notice(f"the compiled loop for {what}"):
                 drive = self._driver(args)
+                self._drive = drive  # compiled: a raise from here on is the field's
                 with numba.parallel_chunksize(chunk):
                     drive(*head, *args)
             self._drive = drive
@@ -311,18 +359,108 @@ class CompiledRunner(Runner):
             with numba.parallel_chunksize(chunk):
                 self._drive(*head, *args)
 
+    def _args(self, units: slice, nsteps: int, k0: int, grid: SaveGrid, rows: Array) -> tuple:
+        """The driver's arguments (after the functions) for the ``units`` (views of this
+        runner's arrays) and ``nsteps`` steps from step ``k0``, saved rows into ``rows``."""
+        L = self.layout.lanes
+        members = slice(
+            None if units.start is None else units.start * L,
+            None if units.stop is None else units.stop * L,
+        )
+        plan = Plan.of(self.h, nsteps, k0, grid, self.kmax, self.impl.begin is not None)
+        data = no_step_data(nsteps, len(range(*members.indices(self.U * L))))
+        return (
+            self.layout.record, self.mp, self.impl.nwork, self.W[units], self.ring[units],
+            self.head[units], self.nh[units], self.coefs, self.gammas, plan, data, rows,
+            self.solver, self.rec[members],
+        )  # fmt: skip
+
     def _advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         buf = self._rows_buffer(out)
-        plan = Plan.of(self.h, nsteps, self.k, grid, self.kmax, self.impl.begin is not None)
-        data = no_step_data(nsteps, self.U * self.layout.lanes)
-        args = (
-            self.layout.record, self.mp, self.impl.nwork, self.W, self.ring, self.head,
-            self.nh, self.coefs, self.gammas, plan, data, buf, self.solver, self.rec,
-        )  # fmt: skip
-        self._call(args)
+        everyone = slice(None)
+        before = self._arrays(everyone) if self.may_raise else None
+        raised: Exception | None = None
+        try:
+            self._call(self._args(everyone, nsteps, self.k, grid, buf))
+        except Exception as exc:  # the field raised (a parallel driver says SystemError)
+            if before is None or self._drive is None:
+                raise
+            raised = exc
+        undone = np.flatnonzero(self.rec[:, driver.REC_CALL_DONE] == 0.0)
+        if undone.size and before is not None:  # their field raised: redo them, alone
+            for m in undone:
+                self._set_arrays(slice(m, m + 1), tuple(a[m : m + 1] for a in before))
+            self._isolate(undone, nsteps, grid, buf)
+        elif undone.size or raised is not None:
+            raise IsoflowError(
+                f"the compiled loop stopped {undone.size} member(s) in the middle of a chunk "
+                f"without a result ({raised!r}); the run cannot go on"
+            ) from raised
         if out.shape[0] and not np.may_share_memory(out, buf):
             out[...] = self.layout.rows_from_flat(buf)
         self._absorb(nsteps)
+
+    # ---- a field that raises: only the members whose B raises fail ---------------------------
+    @property
+    def may_raise(self) -> bool:
+        """Whether the field is the user's (:class:`~isoflow.CompiledB`), which may raise: a
+        chunk then keeps a copy of the arrays it changes, to redo the members after a raise.
+        (Such a run has one member per unit: only built-in kernels run as lanes.)"""
+        return isinstance(self.kernel, CompiledB) and self.layout.lanes == 1
+
+    def _arrays(self, units: slice) -> tuple[Array, ...]:
+        """Copies of what a call changes for the ``units`` (members: one per unit)."""
+        return tuple(a[units].copy() for a in (self.W, self.ring, self.head, self.nh, self.rec))
+
+    def _set_arrays(self, units: slice, saved: tuple[Array, ...]) -> None:
+        for a, b in zip((self.W, self.ring, self.head, self.nh, self.rec), saved, strict=True):
+            a[units] = b
+
+    def _isolate(self, members: NDArray[np.intp], nsteps: int, grid: SaveGrid, buf: Array) -> None:
+        """Redo the chunk of the ``members`` whose call did not return, one by one (serially,
+        each from its state before the call: the members' steps are independent, so every
+        result equals a run without the raising members, bit for bit); a member whose ``B``
+        raises is redone step by step and frozen at its last good state with
+        :data:`FAIL_B_RAISED` at the step that raised."""
+        rows = np.empty((buf.shape[0], 1, buf.shape[2]), dtype=self.W.dtype)
+        drive = self._driver(self._args(slice(0, 1), nsteps, self.k, grid, rows), False)
+        for m in members:
+            one = slice(m, m + 1)
+            saved = self._arrays(one)
+            try:
+                drive(*self._head(), *self._args(one, nsteps, self.k, grid, rows))
+            except Exception:
+                self._set_arrays(one, saved)
+                self._step_until_raise(m, drive, nsteps, grid, buf)
+            else:
+                buf[:, m] = rows[:, 0]
+
+    def _step_until_raise(
+        self, m: int, drive: Any, nsteps: int, grid: SaveGrid, buf: Array
+    ) -> None:
+        """Member ``m``'s chunk one step per call until its field raises (see
+        :meth:`_isolate`); its remaining rows repeat its last good state."""
+        one = slice(m, m + 1)
+        row = 0
+        for k0 in range(self.k, self.k + nsteps):
+            saves = 1 if grid.is_save(k0 + 1) else 0
+            rows = np.empty((saves, 1, buf.shape[2]), dtype=self.W.dtype)
+            saved = self._arrays(one)
+            try:
+                drive(*self._head(), *self._args(one, 1, k0, grid, rows))
+            except Exception as exc:
+                self._set_arrays(one, saved)
+                self._fail_raised(m, k0, exc)
+                buf[row:, m] = self.W[m]
+                return
+            buf[row : row + saves, m] = rows[:, 0]
+            row += saves
+
+    def _fail_raised(self, m: int, k0: int, exc: Exception) -> None:
+        """Record that member ``m``'s field raised ``exc`` in the step from step ``k0``."""
+        self._mark_failed(m, k0, FAIL_B_RAISED)
+        self.failures.messages[m] = f"{type(exc).__name__}: {exc}"
+        self.exceptions[m] = exc
 
     def _absorb(self, nsteps: int) -> None:
         rec = self.rec

@@ -265,12 +265,21 @@ class Algebra(ABC):
 
     # ---- validation ----------------------------------------------------------------------
     def validate(
-        self, W: ArrayLike, what: str = "state", rtol: float = 1e-10, atol: float = 1e-12
+        self,
+        W: ArrayLike,
+        what: str = "state",
+        rtol: float = 1e-10,
+        atol: float = 1e-12,
+        *,
+        project: bool = True,
     ) -> Array:
         """Check that ``W`` is an (ensemble of) element(s) of ``V`` and return it projected.
 
         Integer and float32 input is converted to the algebra's dtype; complex input for a
-        real space is rejected.
+        real space is rejected. With ``project=False`` the checked values are returned as
+        they are (in the algebra's dtype): a restart continues from exactly the state a run
+        held, and a projection is not idempotent in floating point for every space (the
+        trace removal of ``su(n)`` is not).
 
         Raises
         ------
@@ -309,7 +318,7 @@ class Algebra(ABC):
                 distance=worst,
                 tolerance=float(np.max(tol)),
             )
-        return self.project(Wa)
+        return self.project(Wa) if project else Wa
 
     def __repr__(self) -> str:
         return f"<algebra {self.name}>"

@@ -29,7 +29,7 @@ damaged rows where a checksum fails), never silently different data.
 
 from __future__ import annotations
 
-from .._errors import ResultFileError, ResultWriteError
+from .._errors import ModelChangedError, ResultFileError, ResultWriteError
 from .._solve import StreamWriter
 from .export import solution_diagnostics, to_netcdf, to_xarray
 from .layout import FORMAT, FORMAT_VERSION
@@ -42,6 +42,7 @@ __all__ = [
     "FORMAT_VERSION",
     "Checkpoint",
     "HDF5Writer",
+    "ModelChangedError",
     "ResultFileError",
     "ResultWriteError",
     "RunData",

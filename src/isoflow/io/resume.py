@@ -4,9 +4,13 @@ The order is: take the file's write lock (a live writer gets a clear error); ope
 the file; check sizes before building anything; build the problem and method from the stored
 configuration (:func:`isoflow.registry.build`) or take them as arguments; check them against
 the file (model, time grid, shape, method); validate the restart as :func:`isoflow.solve`
-validates a start; verify every row's checksum; and only then touch the file (rewrite a killed
-or version 1 file, truncate it to the checkpoint) and continue through the time loop's own entry
-(:func:`isoflow._solve.continue_run`). A refusal at any step leaves the file unchanged.
+validates a start (:func:`isoflow._solve.check_restart`: checked, not projected, so that the
+run continues from exactly the state it held); verify every row's checksum; compare the model
+with the fingerprint the file recorded when the run started (:mod:`isoflow._fingerprint`: a
+changed model is refused with :class:`~isoflow.ModelChangedError` unless ``force``); and only then
+touch the file (rewrite a killed or version 1 file, truncate it to the checkpoint) and continue
+through the time loop's own entry (:func:`isoflow._solve.continue_run`). A refusal at any step
+leaves the file unchanged.
 
 The per-step arithmetic, the method state (e.g. IsoMP's warm start) and the step ranges between
 saves are those of the uninterrupted run, so the final state equals an uninterrupted run's bit
@@ -21,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import ResultFileError
+from .._errors import ModelChangedError, ResultFileError
+from .._fingerprint import fingerprint_changes, model_fingerprint
 from .._solve import RunState, Solution, check_restart, continue_run
 from ..diagnostics import DiagnosticsAccumulator
 from ..methods import Method
@@ -71,6 +76,24 @@ def _rebuild(
     return problem, method
 
 
+def _check_model(
+    p: Path, meta: dict[str, Any], problem: IsospectralProblem, first: Any, force: bool
+) -> None:
+    """Refuse (unless ``force``) a problem whose fingerprint differs from the one the file
+    recorded when its run started (files written before fingerprints record none)."""
+    recorded = meta.get("model_fingerprint")
+    if recorded is None or first is None or force:
+        return
+    changes = fingerprint_changes(recorded, model_fingerprint(problem, first))
+    if changes:
+        raise ModelChangedError(
+            f"{p}: the model changed since the run started ({'; '.join(changes)}); resuming "
+            "would mix two models in one file: restore the model, or resume with force=True "
+            "(isoflow run --resume FILE --force) to continue with this one anyway",
+            changes=changes,
+        )
+
+
 def resume(
     path: str | os.PathLike[str],
     *,
@@ -80,6 +103,7 @@ def resume(
     throw: bool = True,
     chunk_rows: int = 256,
     flush_seconds: float = 1.0,
+    force: bool = False,
 ) -> Solution:
     """Continue a streamed run from its last checkpoint, appending to the same file.
 
@@ -94,6 +118,9 @@ def resume(
         As in :func:`isoflow.solve`.
     chunk_rows, flush_seconds :
         As in :class:`~isoflow.io.HDF5Writer`.
+    force : bool
+        Resume although the model differs from the one the run started with (see
+        :class:`~isoflow.ModelChangedError`); the file keeps the fingerprint of the first.
 
     Returns
     -------
@@ -103,6 +130,11 @@ def resume(
 
     Raises
     ------
+    ModelChangedError
+        The model is not the one the run started with: its ``B`` (or a function of its
+        diagnostics) differs at the probe state the file's fingerprint recorded, or the
+        source of the user code defining it changed (the file is left unchanged). Files
+        written before isoflow recorded fingerprints are resumed without this check.
     ResultFileError
         Another process writes the file; the file is damaged or crafted; or the problem or
         method do not match the run it records (the file is left unchanged).
@@ -132,16 +164,19 @@ def resume(
             if tuple(np.shape(cp.y)) != tuple(meta["state_shape"]):
                 raise o.fail(f"checkpoint state shape {np.shape(cp.y)} is not the run's")
             state = RunState(cp.step, cp.y, cp.method_state, cp.failures)
-            check_restart(
+            restart = check_restart(
                 problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every
             )
             # every row verified, and the drifts of the rows written accumulated
             acc = DiagnosticsAccumulator(problem)
             names = list(o.rows)
+            first = None
             for blocks, data in iter_rows(o, cp, names):
                 if blocks[0][0] == 0:
-                    acc.set_first_state(data["ys"][0])
+                    first = data["ys"][0]
+                    acc.set_first_state(first)
                 acc.absorb(data["ts"], {k: data[k] for k in names[2:]})
+            _check_model(p, meta, problem, first, force)
         if needs_rewrite:
             cp = recover(p, chunk_rows)
         writer = HDF5Writer.reopen(
@@ -153,7 +188,4 @@ def resume(
     finally:
         if not handed_over:
             lock.release()
-    return continue_run(
-        problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
-        writer=writer, accumulator=acc, progress=progress, throw=throw,
-    )  # fmt: skip
+    return continue_run(restart, writer=writer, accumulator=acc, progress=progress, throw=throw)

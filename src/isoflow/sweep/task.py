@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import IsoflowError
+from .._errors import IsoflowError, ModelChangedError
 from .._solve import Solution, solve
 from .files import TaskPaths, file_sha256, read_summary, seal, task_paths, write_json_atomic
 from .spec import Member, SweepError, SweepSpec, Task, canonical_json
@@ -280,6 +280,8 @@ def _resumed(spec: SweepSpec, task: Task, paths: TaskPaths, problem: Any, method
             chunk_rows=spec.chunk_rows,
             flush_seconds=spec.flush_seconds,
         )
+    except ModelChangedError:
+        raise  # the sweep's other tasks ran the recorded model: not started again
     except (IsoflowError, OSError) as exc:  # no checkpoint, unreadable file
         _log(paths.log, f"cannot resume ({exc}); starting again")
         return None

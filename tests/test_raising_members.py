@@ -1,0 +1,93 @@
+"""One ensemble member whose ``B`` raises fails alone (issue 25): it is frozen at its last good
+state with ``FAIL_B_RAISED`` and the exception's text at the step that raised; the others take
+every step, their states equal to a run without that member bit for bit, on the compiled path
+(a user's ``CompiledB``, serial and parallel drivers) and on the NumPy path (a vectorized
+``B``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numba
+import numpy as np
+import pytest
+
+import isoflow as iso
+import user_kernels
+
+N_STEPS, DT, BAD = 40, 0.05, 2
+C = 0.5 * np.add.outer(np.arange(1.0, 5.0), np.arange(1.0, 5.0))
+ALG = iso.algebras.so(4)
+
+
+def _members() -> Any:
+    """Four members; member :data:`BAD` much larger than the others."""
+    Y = np.stack([ALG.random(s, scale=0.1) for s in range(4)])
+    Y[BAD] = ALG.random(23, scale=0.8)  # its largest entry dips to 1.1, then rises to 1.65
+    return Y
+
+
+def _problem(limit: float, compiled: bool) -> iso.IsospectralProblem:
+    if compiled:
+        kernel = iso.CompiledB(user_kernels.raises_when_large, (C, float(limit)))
+        return iso.IsospectralProblem(algebra=ALG, kernel=kernel)
+    return iso.IsospectralProblem(B=user_kernels.raises_when_large_numpy(C, limit), algebra=ALG)
+
+
+def _solve(Y: Any, limit: float, compiled: bool, **kw: Any) -> iso.Solution:
+    return iso.solve(_problem(limit, compiled), iso.IsoMP(), Y, dt=DT, n_steps=N_STEPS,
+                     progress=False, **kw)  # fmt: skip
+
+
+def _limit_and_step(compiled: bool) -> tuple[float, int]:
+    """A limit that member BAD's largest entry passes in the middle of the run (the others
+    stay far below), and the step whose ``B`` raises: where the member alone raises, on its
+    own NumPy run."""
+    free = _solve(_members(), np.inf, compiled)
+    a = np.abs(free.ys).max(axis=(2, 3))
+    k = N_STEPS // 2
+    assert np.all(np.diff(a[k - 5 : k + 2, BAD]) > 0) and a[: k + 1, BAD].max() == a[k, BAD]
+    limit = a[k, BAD] + 0.25 * (a[k + 1, BAD] - a[k, BAD])
+    assert np.delete(a, BAD, axis=1).max() < 0.5 * limit
+    alone = _solve(_members()[BAD], limit, False, throw=False)
+    assert k <= int(alone.failed_step) <= k + 2, alone.failed_step
+    return float(limit), int(alone.failed_step)
+
+
+@pytest.fixture(params=["compiled, serial", "compiled, parallel", "NumPy"])
+def path(request: pytest.FixtureRequest) -> Any:
+    threads = 2 if request.param == "compiled, parallel" else 1
+    old = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    yield request.param
+    numba.set_num_threads(old)
+
+
+def test_only_the_member_whose_b_raises_fails(path: str) -> None:
+    compiled = path != "NumPy"
+    limit, k = _limit_and_step(compiled)
+    Y = _members()
+    sol = _solve(Y, limit, compiled, throw=False)
+    assert ("NumPy" in sol.stats.runner) != compiled, sol.stats.runner
+    assert not sol.success and sol.failed_step.tolist() == [-1, -1, k, -1]
+    assert list(sol.failure_reasons) == [(BAD,)]
+    assert sol.failure_reasons[(BAD,)] == "B raised: ValueError: entry too large"
+    assert f"(2,) at step {k} (B raised: ValueError" in sol.message
+
+    others = np.delete(np.arange(4), BAD)
+    alone = _solve(Y[others], limit, compiled)  # a run without the bad member
+    assert alone.success
+    assert sol.ys[:, others].tobytes() == alone.ys.tobytes()
+    free = _solve(Y, np.inf, compiled)  # the bad member up to its last good state
+    assert sol.ys[: k + 1, BAD].tobytes() == free.ys[: k + 1, BAD].tobytes()
+    assert all(row.tobytes() == sol.ys[k, BAD].tobytes() for row in sol.ys[k + 1 :, BAD])
+
+
+def test_throw_raises_with_the_exception_as_cause(path: str) -> None:
+    compiled = path != "NumPy"
+    limit, k = _limit_and_step(compiled)
+    with pytest.raises(iso.IsoflowError, match=f"at step {k}") as err:
+        _solve(_members(), limit, compiled)
+    assert "\n" not in str(err.value)
+    assert isinstance(err.value.__cause__, ValueError)
+    assert str(err.value.__cause__) == "entry too large"
