@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import isoflow as iso
-from isoflow._stepping import MemberFailures
+from isoflow._failures import MemberFailures
 from isoflow.algebras import Algebra
 
 Array = NDArray[Any]

@@ -32,28 +32,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._compile_clock import CompileClock, compile_clock
 from ._errors import (
-    ConvergenceError,
     IsoflowError,
-    NonFiniteError,
-    NotInSpaceError,
     ParameterError,
     ResultWriteError,
     ShapeError,
     StepSizeError,
     TimeSpanError,
 )
+from ._failures import MemberFailures, describe, exception_for, step_exception
 from ._fingerprint import model_fingerprint
-from ._stepping import (
-    FAIL_B_RAISED,
-    FAIL_LEFT_SPACE,
-    MemberFailures,
-    PythonRunner,
-    Runner,
-    stop_members_leaving_the_space,
-)
+from ._stepping import PythonRunner, Runner, stop_members_leaving_the_space
 from .diagnostics import Diagnostics, DiagnosticsAccumulator
-from .methods import Method, StepResult
-from .nonlinear import STATUS_CONVERGED, STATUS_NON_FINITE
+from .methods import Method
 from .problems import IsospectralProblem
 
 __all__ = [
@@ -353,28 +343,6 @@ def _check_state(
 # ---- one step ---------------------------------------------------------------------------------
 
 
-def _failure_exception(method: Method, res: StepResult, k: int, t: float) -> Exception:
-    """The exception describing a rejected step ``k`` that started at time ``t``."""
-    if not res.success:
-        assert res.residual is not None and res.iterations is not None
-        status = np.asarray(res.status)
-        bad = int(np.count_nonzero(status != STATUS_CONVERGED))
-        reason = res.failure_reason()
-        return ConvergenceError(
-            f"{method.name}: the nonlinear solve of step {k} (t = {t:.6g}) did not converge "
-            f"({reason}) for {bad} of {status.size} ensemble member(s): residual "
-            f"{float(np.max(res.residual)):.3e} after {int(np.max(res.iterations))} "
-            "iterations. Reduce dt (h * ||B(W)|| should stay well below 2) or change the "
-            "solver.",
-            step=k,
-            time=t,
-            residual=float(np.max(res.residual)),
-            iterations=int(np.max(res.iterations)),
-            reason=reason,
-        )
-    return NonFiniteError(f"{method.name}: the state became non-finite at step {k} (t = {t:.6g})")
-
-
 def step(
     problem: IsospectralProblem,
     method: Method,
@@ -418,7 +386,7 @@ def step(
     W = _check_state(problem, y, "state") if validate else np.asarray(y)
     res = method.step(problem, W, h, method.init(problem, W, h))
     if not res.success or not np.all(np.isfinite(res.y)):
-        raise _failure_exception(method, res, 0, 0.0)
+        raise step_exception(method.name, res, 0, 0.0)
     return (res.y, res) if return_info else res.y
 
 
@@ -708,43 +676,6 @@ def _runner_for(problem: IsospectralProblem, method: Method, state: RunState, dt
     )  # fmt: skip
 
 
-def _failure_message(method: Method, fails: MemberFailures, batch: tuple[int, ...],
-                     t0: float, dt: float) -> str:  # fmt: skip
-    idx = fails.failed
-    if batch == ():
-        m = 0
-        k = int(fails.step[m])
-        t = t0 + k * dt
-        code = int(fails.status[m])
-        if code == FAIL_B_RAISED:
-            return f"{method.name}: at step {k} (t = {t:.6g}) {fails.reason(m)}"
-        if code == FAIL_LEFT_SPACE:
-            return (
-                f"{method.name}: {fails.reason(m)}; the run stops at the last saved state "
-                f"where B was in the normalizer, after step {k} (t = {t:.6g})"
-            )
-        if code == STATUS_NON_FINITE and fails.iterations[m] <= 1:
-            return f"{method.name}: the state became non-finite at step {k} (t = {t:.6g})"
-        return (
-            f"{method.name}: the nonlinear solve of step {k} (t = {t:.6g}) did not converge "
-            f"({fails.reason(m)}): residual {fails.residual[m]:.3e} after "
-            f"{int(fails.iterations[m])} iterations. Reduce dt (h * ||B(W)|| should stay well "
-            "below 2) or change the solver."
-        )
-    shown = ", ".join(
-        f"{tuple(int(i) for i in np.unravel_index(int(m), batch))} at step "
-        f"{int(fails.step[m])} ({fails.reason(int(m))})"
-        for m in idx[:5]
-    )
-    more = f" and {idx.size - 5} more" if idx.size > 5 else ""
-    total = int(np.prod(batch))
-    return (
-        f"{method.name}: {idx.size} of {total} ensemble member(s) failed and were frozen at "
-        f"their last good state: {shown}{more}. The other members took every step. Reduce dt "
-        "(h * ||B(W)|| should stay well below 2) or change the solver."
-    )
-
-
 class _Sink:
     """The writer's side of the loop: diagnostics of the saved rows, appends, checkpoints and
     the final close, in the order they are given.
@@ -971,14 +902,16 @@ def _run(
                     last_checkpoint, rows_since = now, 0
                 if newly:
                     reported = runner.failures.failed.size
-                    message = _failure_message(method, runner.failures, batch, t0, dt)
+                    message = describe(method.name, runner.failures, batch, t0, dt)
                     status = RUN_FAILED
                     if throw:
-                        failure_exc = _convergence_error(message, runner, t0, dt)
+                        failure_exc = exception_for(
+                            message, runner.failures, runner.exceptions, t0, dt
+                        )
                         break
         if runner.failures.failed.size and status == RUN_FINISHED:
             status = RUN_FAILED
-            message = _failure_message(method, runner.failures, batch, t0, dt)
+            message = describe(method.name, runner.failures, batch, t0, dt)
         if runner.k < n and not runner.failures.alive.any():
             # every member failed: the run ends at its last good state; save it at its time
             with _deferred_sigint():
@@ -1064,30 +997,6 @@ def _save_points(k0: int, k1: int, save_every: int, k_final: int) -> Array:
     if k0 < k_final <= k1 and k_final % save_every:
         ks.append(k_final)
     return np.asarray(ks, dtype=float)
-
-
-def _convergence_error(message: str, runner: Runner, t0: float, dt: float) -> Exception:
-    fails = runner.failures
-    m = int(fails.failed[np.argmin(fails.step[fails.failed])])
-    k = int(fails.step[m])
-    code = int(fails.status[m])
-    cause = runner.exceptions.get(m)
-    if code == FAIL_LEFT_SPACE and isinstance(cause, NotInSpaceError):
-        return NotInSpaceError(message, distance=cause.distance, tolerance=cause.tolerance)
-    if code == FAIL_B_RAISED:
-        exc: Exception = IsoflowError(message)
-        exc.__cause__ = cause
-        return exc
-    if code == STATUS_NON_FINITE and fails.iterations[m] <= 1 and fails.residual[m] == 0:
-        return NonFiniteError(message)
-    return ConvergenceError(
-        message,
-        step=k,
-        time=t0 + k * dt,
-        residual=float(fails.residual[m]),
-        iterations=int(fails.iterations[m]),
-        reason=fails.reason(m).split(":")[0],
-    )
 
 
 def _stats(runner: Runner, k0: int, wall: float, compile_time: float) -> SolveStats:

@@ -50,6 +50,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from . import _failures
 from ._errors import ParameterError
 from .algebras import Algebra
 
@@ -68,16 +69,11 @@ __all__ = [
 
 Array = NDArray[Any]
 
-STATUS_CONVERGED = 0
-STATUS_MAX_ITER = 1
-STATUS_DIVERGED = 2
-STATUS_NON_FINITE = 3
-STATUS_NAMES = {
-    STATUS_CONVERGED: "converged",
-    STATUS_MAX_ITER: "max_iter",
-    STATUS_DIVERGED: "diverged",
-    STATUS_NON_FINITE: "non_finite",
-}
+#: The solvers' status codes (:mod:`isoflow._failures` holds the whole vocabulary).
+STATUS_CONVERGED = _failures.CONVERGED
+STATUS_MAX_ITER = _failures.MAX_ITER
+STATUS_DIVERGED = _failures.DIVERGED
+STATUS_NON_FINITE = _failures.NON_FINITE
 
 #: Returned by :func:`stopping_step` while the iteration goes on (not a status of a result).
 CONTINUE = -1

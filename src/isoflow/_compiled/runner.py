@@ -23,8 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import IsoflowError
+from .._failures import B_RAISED, MemberFailures
 from .._save_grid import SaveGrid
-from .._stepping import FAIL_B_RAISED, MemberFailures, Runner
+from .._stepping import Runner
 from ..kernels import CompiledB
 from ..methods import Composition, Method
 from ..methods import composition as _composition
@@ -421,7 +422,7 @@ class CompiledRunner(Runner):
         each from its state before the call: the members' steps are independent, so every
         result equals a run without the raising members, bit for bit); a member whose ``B``
         raises is redone step by step and frozen at its last good state with
-        :data:`FAIL_B_RAISED` at the step that raised."""
+        :data:`B_RAISED` at the step that raised."""
         rows = np.empty((buf.shape[0], 1, buf.shape[2]), dtype=self.W.dtype)
         drive = self._driver(self._args(slice(0, 1), nsteps, self.k, grid, rows), False)
         for m in members:
@@ -458,7 +459,7 @@ class CompiledRunner(Runner):
 
     def _fail_raised(self, m: int, k0: int, exc: Exception) -> None:
         """Record that member ``m``'s field raised ``exc`` in the step from step ``k0``."""
-        self._mark_failed(m, k0, FAIL_B_RAISED)
+        self._mark_failed(m, k0, B_RAISED)
         self.failures.messages[m] = f"{type(exc).__name__}: {exc}"
         self.exceptions[m] = exc
 

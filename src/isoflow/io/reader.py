@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import IsoflowError, ResultFileError
-from .._stepping import MemberFailures
+from .._failures import MemberFailures
 from ..diagnostics import DriftAccumulator
 from .codec import (
     check_shape,
