@@ -38,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from isoflow._save_grid import SaveGrid
+
 HERE = Path(__file__).resolve().parent
 
 __all__ = [
@@ -294,7 +296,7 @@ class StepTimer:
         r = self.runner
         before = r.iterations_total
         out = np.empty((1, r.M, *r.core), dtype=self.dtype)
-        r.advance(n, 2**62, r.k + n, out)
+        r.advance(n, SaveGrid(2**62, r.k + n), out)
         if not r.failures.alive.all():
             m = int(r.failures.failed[0])
             raise RuntimeError(f"a benchmark run failed ({r.label}): {r.failures.reason(m)}")

@@ -167,20 +167,19 @@ class RunResult:
 def run_with(runner, n: int, save_every: int = 1, chunks: tuple[int, ...] | None = None,
              batch: tuple[int, ...] = ()) -> RunResult:  # fmt: skip
     """Advance ``runner`` by ``n`` steps (in the given chunk sizes), saving every ``save_every``."""
-    from isoflow._solve import _save_steps
+    from isoflow._save_grid import SaveGrid
 
+    grid = SaveGrid(save_every, n)
     rows = []
-    k = runner.k
     for c in chunks or (n,):
-        r = _save_steps(runner.k, runner.k + c, save_every, n)
         out = np.empty(
-            (r, runner_members(runner), *runner_core(runner)), dtype=runner_dtype(runner)
+            (grid.count(runner.k, runner.k + c), runner_members(runner), *runner_core(runner)),
+            dtype=runner_dtype(runner),
         )
         k0 = runner.k
-        runner.advance(c, save_every, n, out)
-        rows.append(out[: _save_steps(k0, runner.k, save_every, n)])
+        runner.advance(c, grid, out)
+        rows.append(out[: grid.count(k0, runner.k)])
     y, st = runner.state()
-    del k
     return RunResult(
         rows=np.concatenate(rows), y=y, state=st, k=runner.k,
         iterations=runner.iterations_total, iterations_max=runner.iterations_max,

@@ -53,6 +53,10 @@ class SaveGrid:
             ks.append(self.k_final)
         return np.asarray(ks, dtype=np.int64)
 
+    def saved_steps(self) -> NDArray[np.int64]:
+        """Every saved step of a whole run, the start (step 0) included."""
+        return np.concatenate([[0], self.points(0, self.k_final)]).astype(np.int64)
+
     def rows(self, fresh: bool) -> int:
         """Rows of a whole run: the save points, and the initial state when ``fresh``."""
         return self.count(0, self.k_final) + (1 if fresh else 0)

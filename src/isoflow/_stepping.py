@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from ._errors import NotInSpaceError
 from ._failures import B_RAISED, LEFT_SPACE, MemberFailures
+from ._save_grid import SaveGrid
 from .methods import Method
 from .nonlinear import STATUS_CONVERGED, STATUS_NON_FINITE
 from .problems import IsospectralProblem
@@ -61,9 +62,9 @@ class Runner:
         every member has failed, the run ends where the last one failed.
     exceptions : dict of int to BaseException
         Per failed member (flattened index), the exception that failed it where there is one:
-        what its ``B`` raised (:data:`B_RAISED`), or the
-        :class:`~isoflow.NotInSpaceError` of a ``B`` that left the normalizer
-        (:data:`LEFT_SPACE`).
+        what its ``B`` raised (the failure code ``B raised``), or the
+        :class:`~isoflow.NotInSpaceError` of a ``B`` that left the normalizer (``left the
+        space``; :mod:`isoflow._failures`).
     failures : MemberFailures
     iterations_total, iterations_max : int
         Nonlinear iterations summed over steps and members; the largest for one step.
@@ -73,11 +74,19 @@ class Runner:
         Evaluations of ``B`` summed over members (Newton's Jacobians, RK stages included).
     label : str
         What runs the steps, for messages (``"NumPy"``, ``"compiled (dense BLAS)"``, ...).
+    parallel : bool
+        Whether its steps run over threads of its own (the time loop then keeps the writer's
+        work in the loop's thread).
+    checkpoints_at_saves : bool
+        Whether a checkpoint of it must fall on a save point (the time loop then ends its
+        chunks there).
     """
 
     k: int
     failures: MemberFailures
     label: str = "runner"
+    parallel: bool = False
+    checkpoints_at_saves: bool = False
 
     def __init__(self) -> None:
         self.exceptions: dict[int, BaseException] = {}
@@ -86,9 +95,10 @@ class Runner:
         self.residual_max = 0.0
         self.b_evaluations = 0
 
-    def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
-        """Take ``nsteps`` steps; the state after every step ``k`` with ``k % save_every == 0``
-        or ``k == k_final`` goes into the next row of ``out`` (``(R, M, *core)``)."""
+    def advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
+        """Take ``nsteps`` steps; the state after every save point ``k`` of ``grid``
+        (:meth:`SaveGrid.is_save <isoflow._save_grid.SaveGrid.is_save>`) goes into the next
+        row of ``out`` (``(R, M, *core)``)."""
         raise NotImplementedError  # pragma: no cover
 
     def state(self) -> tuple[Array, Any]:
@@ -218,9 +228,9 @@ class PythonRunner(Runner):
         except Exception as exc:  # B (or the user's code under it) raised
             return None, exc
 
-    def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+    def advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         if self.single:
-            self._advance_single(nsteps, save_every, k_final, out)
+            self._advance_single(nsteps, grid, out)
             return
         row = 0
         fails = self.failures
@@ -230,11 +240,11 @@ class PythonRunner(Runner):
             if not fails.alive.any():
                 return  # every member frozen: the run ends after k - 1 steps
             self.k = k
-            if k % save_every == 0 or k == k_final:
+            if grid.is_save(k):
                 out[row] = self.Y
                 row += 1
 
-    def _advance_single(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+    def _advance_single(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         """:meth:`advance` for one system (no member bookkeeping on the way)."""
         if not self.failures.alive[0]:
             return
@@ -264,7 +274,7 @@ class PythonRunner(Runner):
                 self.residual_max = max(self.residual_max, float(res.residual))
             y, st = res.y, res.state
             self.k = k + 1
-            if self.k % save_every == 0 or self.k == k_final:
+            if grid.is_save(self.k):
                 out[row, 0] = y
                 row += 1
         self.Y[0] = y

@@ -166,6 +166,7 @@ class CompiledRunner(Runner):
         self.rec[:, driver.REC_FAIL_STEP] = np.where(
             self.failures.step >= 0, self.failures.step + 1, -1
         )
+        self.checkpoints_at_saves = layout.restart_at_saves  # see Layout.restart_at_saves
         self.begin = impl.begin if impl.begin is not None else no_begin
         self.parallel = self.U >= 2 and _threads() > 1 and self._threads_allowed()
         self._drive: Any = None
@@ -177,11 +178,6 @@ class CompiledRunner(Runner):
         from threadpoolctl import threadpool_info
 
         return all(p.get("num_threads", 1) <= 1 for p in threadpool_info())
-
-    @property
-    def checkpoints_at_saves(self) -> bool:  # type: ignore[override]
-        """Checkpoints must fall on save points (see :attr:`Layout.restart_at_saves`)."""
-        return self.layout.restart_at_saves
 
     # ---- method state <-> ring ---------------------------------------------------------------
     def _position_states(self, state: Any) -> list[Any]:
@@ -279,8 +275,7 @@ class CompiledRunner(Runner):
         par = self.parallel if parallel is None else parallel
         return compiled_driver(dt.driver_signature(args), par)
 
-    def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
-        grid = SaveGrid(save_every, k_final)
+    def advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         if not self.layout.restart_at_saves:
             self._advance(nsteps, grid, out)
             return
