@@ -26,6 +26,7 @@ from .._solve import RunState, Solution, check_restart, continue_run
 from ..diagnostics import DiagnosticsAccumulator
 from ..methods import Method
 from ..problems import IsospectralProblem
+from ..threads import ThreadRequest, plan_threads
 from .lock import WriteLock
 from .reader import Checkpoint, iter_rows, open_result, read_checkpoint
 from .recovery import recover
@@ -80,6 +81,7 @@ def resume(
     throw: bool = True,
     chunk_rows: int = 256,
     flush_seconds: float = 1.0,
+    threads: ThreadRequest = None,
 ) -> Solution:
     """Continue a streamed run from its last checkpoint, appending to the same file.
 
@@ -94,6 +96,8 @@ def resume(
         As in :func:`isoflow.solve`.
     chunk_rows, flush_seconds :
         As in :class:`~isoflow.io.HDF5Writer`.
+    threads : None, int or dict
+        As in :func:`isoflow.solve`.
 
     Returns
     -------
@@ -111,7 +115,10 @@ def resume(
         of range, a model that is not built in); the file is left unchanged.
     NotInSpaceError
         The checkpoint state is not in the problem's space (as :func:`isoflow.solve`).
+    ParameterError
+        A malformed ``threads`` (checked before the file is touched).
     """
+    plan_threads(threads)  # a malformed request is refused before anything else
     p = Path(path)
     if p.is_symlink():
         p = Path(os.path.realpath(p))
@@ -155,5 +162,5 @@ def resume(
             lock.release()
     return continue_run(
         problem, method, state, t0=t0, dt=dt, n_steps=n_steps, save_every=save_every,
-        writer=writer, accumulator=acc, progress=progress, throw=throw,
+        writer=writer, accumulator=acc, progress=progress, throw=throw, threads=threads,
     )  # fmt: skip
