@@ -188,6 +188,26 @@ def test_limits_hold_inside_the_loop_for_numpys_and_scipys_openblas() -> None:
     assert _counts({"blas": numpy_path["after"]}) == [CORES, CORES]  # restored after the run
 
 
+def test_limits_changed_during_a_run_are_applied_again_from_the_next_chunk() -> None:
+    from threadpoolctl import threadpool_limits
+
+    calls = [0]
+
+    def B(W: Any) -> Any:  # resets the BLAS threads to 2 in the middle of the run
+        calls[0] += 1
+        if calls[0] == 30:
+            threadpool_limits(2)  # (as another thread's solve restoring its limits would)
+        return -0.5 * W * np.arange(1, 5)[:, None] * np.arange(1, 5)[None, :]
+
+    alg = iso.algebras.so(4)
+    rec = _Recorder()
+    prob = iso.IsospectralProblem(algebra=alg, B=B)
+    iso.solve(prob, iso.IsoMP(), alg.random(seed=0, scale=0.5), dt=0.1, n_steps=20, writer=rec)
+    reset = [i for i, s in enumerate(rec.seen) if 2 in _counts(s)]
+    assert len(reset) == 1, rec.seen  # the next chunk limits it again
+    assert all(_counts(s) == [1] * len(s["blas"]) for s in rec.seen[-3:]), rec.seen
+
+
 # ---- the policy and requests --------------------------------------------------------------------
 
 

@@ -287,14 +287,17 @@ class ThreadPools:
     restores what was there before.
 
     The limits reach the libraries loaded when :meth:`apply` runs; :meth:`refresh` (cheap:
-    it compares the number of imported modules) applies them again after an import loaded
-    more, so a library loaded in the middle of a run is limited from the next chunk on.
+    it compares the number of imported modules and the libraries' thread counts, about
+    10 us) applies them again after an import loaded more, or after something else changed
+    them (another thread's solve restoring its own limits), so a library loaded or reset in
+    the middle of a run is limited from the next chunk on.
     """
 
     def __init__(self) -> None:
         self.plan: ThreadPlan | None = None
         self._limiter: Any = None
         self._modules = -1
+        self._counts: list[int] = []
         self._numba_before: int | None = None
         self._token: Any = None
 
@@ -317,9 +320,14 @@ class ThreadPools:
             self.refresh()
 
     def refresh(self) -> None:
-        """Apply the limits again if modules were imported (and libraries maybe loaded)."""
-        if len(sys.modules) != self._modules:
+        """Apply the limits again if modules were imported (and libraries maybe loaded) or
+        the libraries' thread counts are no longer those set."""
+        if len(sys.modules) != self._modules or self._thread_counts() != self._counts:
             self._limit()
+
+    @staticmethod
+    def _thread_counts() -> list[int]:
+        return [int(lib.num_threads) for lib in _controller().lib_controllers]
 
     def _limit(self) -> None:
         assert self.plan is not None
@@ -328,6 +336,7 @@ class ThreadPools:
         controller = _controller()
         self._modules = len(sys.modules)
         self._limiter = controller.limit(limits=self.plan.blas)  # every BLAS and OpenMP
+        self._counts = self._thread_counts()  # what the libraries took (a build may cap it)
 
     def restore(self) -> None:
         """Put back the limits and the numba threads from before the first :meth:`apply`."""
