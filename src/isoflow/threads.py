@@ -16,8 +16,8 @@ product it takes part in (on two cores with the other one busy, the README's fir
   libraries), and restores the previous limits when it ends;
 * the default (``threads=None``): one BLAS/OpenMP thread (:data:`DEFAULT_BLAS_THREADS`; the
   measurements are in ``docs/user_guide/threads.rst``: two BLAS threads lose to one for the
-  sizes measured as soon as the other core is busy, and for small states even on an idle
-  machine), and numba threads on every core for the compiled loops that run members in
+  sizes measured as soon as the other core is busy, and gain nothing for small states even on
+  an idle machine), and numba threads on every core for the compiled loops that run members in
   parallel (members are independent: the work is handed out in small pieces, so a thread slowed
   by another process leaves its pieces to the others);
 * ``threads=k`` (:func:`isoflow.solve`, :func:`isoflow.io.resume`, ``isoflow run --threads``):
