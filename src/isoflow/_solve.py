@@ -55,6 +55,7 @@ from .diagnostics import Diagnostics, DiagnosticsAccumulator
 from .methods import Method, StepResult
 from .nonlinear import STATUS_CONVERGED, STATUS_NON_FINITE
 from .problems import IsospectralProblem
+from .threads import ThreadPools, ThreadRequest, plan_threads
 
 __all__ = [
     "RUN_FAILED",
@@ -117,6 +118,11 @@ class SolveStats:
         everything was compiled earlier in the process.
     runner : str
         What ran the steps: ``"NumPy"`` or ``"compiled, <layout>"``.
+    threads : dict
+        The threads the run used (:mod:`isoflow.threads`): ``"blas"``, the limit of every
+        BLAS and OpenMP library during the loop; ``"numba"``, the numba threads the compiled
+        loop ran its members (or chunks) on, 1 when it ran serially; ``"cores"``, the cores
+        the process could run on.
     """
 
     n_steps: int = 0
@@ -128,6 +134,7 @@ class SolveStats:
     wall_time: float = 0.0
     compile_time: float = 0.0
     runner: str = ""
+    threads: dict[str, int] = dataclasses.field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """Plain-Python dictionary (JSON-ready)."""
@@ -439,6 +446,7 @@ def solve(
     progress: bool | None = None,
     throw: bool = True,
     writer: StreamWriter | None = None,
+    threads: ThreadRequest = None,
 ) -> Solution:
     r"""Integrate ``problem`` from ``y0`` with a fixed step (no adaptivity, by design).
 
@@ -474,6 +482,15 @@ def solve(
         number of steps. The returned :class:`Solution` then holds only two saved states,
         the initial and the final one, and its ``diagnostics`` has the drifts over *all* saved
         states with the time series of those two states only.
+    threads : None, int or dict
+        Threads of the run (:mod:`isoflow.threads`), applied inside the loop to every BLAS and
+        OpenMP library and to numba. ``None`` (default): the enclosing
+        ``iso.threads.thread_limits`` block's choice, else one BLAS thread and numba threads
+        on every core for compiled loops that run ensemble members in parallel; ``k``: ``k``
+        cores (numba threads when the compiled loop runs members in parallel, else BLAS
+        threads); ``{"blas": b, "numba": m}``: both. Environment variables such as
+        ``OPENBLAS_NUM_THREADS`` are upper bounds; more threads than cores are refused
+        (:class:`ParameterError`). The counts used are in ``stats.threads``.
 
     Returns
     -------
@@ -495,6 +512,7 @@ def solve(
             problem, method, RunState(0, W, method.init(problem, W, dt_)),
             t0=float(t0), dt=dt_, n=n, save_every=int(save_every), diagnostics=diagnostics,
             progress=progress, throw=throw, writer=writer, fresh=True, clock=clock,
+            threads=threads,
         )  # fmt: skip
 
 
@@ -579,17 +597,19 @@ def continue_run(
     accumulator: DiagnosticsAccumulator,
     progress: bool | None = None,
     throw: bool = True,
+    threads: ThreadRequest = None,
 ) -> Solution:
     """Continue a run validated by :func:`check_restart`, appending to ``writer``.
 
-    ``accumulator`` has absorbed the diagnostics of the rows already written.
+    ``accumulator`` has absorbed the diagnostics of the rows already written; ``threads`` is
+    as in :func:`solve`.
     """
     r = restart
     with compile_clock(show=progress is not False) as clock:
         return _run(
             r.problem, r.method, r.state, t0=r.t0, dt=r.dt, n=r.n_steps,
             save_every=r.save_every, diagnostics=True, progress=progress, throw=throw,
-            writer=writer, fresh=False, accumulator=accumulator, clock=clock,
+            writer=writer, fresh=False, accumulator=accumulator, clock=clock, threads=threads,
         )  # fmt: skip
 
 
@@ -823,6 +843,29 @@ class _Sink:
 
 
 def _run(
+    problem: IsospectralProblem, method: Method, state: RunState, *,
+    threads: ThreadRequest = None, **loop: Any,
+) -> Solution:  # fmt: skip
+    """The loop (:func:`_loop`) under the run's thread counts (:mod:`isoflow.threads`):
+    applied before the runner is built, settled once it is (a number of cores goes to numba
+    when the runner runs members in parallel, else to BLAS), and restored at the end."""
+    pools = ThreadPools()
+    try:
+        pools.apply(plan_threads(threads, parallel=True))
+        return _loop(problem, method, state, threads=threads, pools=pools, **loop)
+    finally:
+        pools.restore()
+
+
+def _settle_threads(pools: ThreadPools, threads: ThreadRequest, runner: Runner) -> dict[str, int]:
+    """Apply the final thread counts for ``runner``; return those it uses (``stats.threads``)."""
+    parallel = bool(getattr(runner, "parallel", False))
+    plan = plan_threads(threads, parallel=parallel)
+    pools.apply(plan)
+    return {"cores": plan.cores, "numba": plan.numba if parallel else 1, "blas": plan.blas}
+
+
+def _loop(
     problem: IsospectralProblem,
     method: Method,
     state: RunState,
@@ -837,6 +880,8 @@ def _run(
     writer: StreamWriter | None,
     fresh: bool,
     clock: CompileClock,
+    threads: ThreadRequest,
+    pools: ThreadPools,
     accumulator: DiagnosticsAccumulator | None = None,
 ) -> Solution:
     """The loop (see the module docstring). ``fresh`` runs open the writer and write the
@@ -858,6 +903,7 @@ def _run(
         accumulator = DiagnosticsAccumulator(problem, keep_series=memory)
         accumulator.set_first_state(W)
     runner = _runner_for(problem, method, state, dt)
+    used_threads = _settle_threads(pools, threads, runner)
     k0 = runner.k
     compute_series = diagnostics or not memory
     sink = _Sink(
@@ -938,6 +984,7 @@ def _run(
                     out = out_writer.rows(rows).reshape(rows, M, *alg.shape)
                 else:
                     out = np.empty((rows, M, *alg.shape), dtype=alg.dtype)
+                pools.refresh()  # limit a library the last chunk loaded (an import)
                 t_call = time.perf_counter()
                 runner.advance(nsteps, save_every, n, out)
                 elapsed = time.perf_counter() - t_call
@@ -1005,7 +1052,7 @@ def _run(
         bar.close()
         sink.shutdown()
         wall = time.perf_counter() - clock.started
-        stats = _stats(runner, k0, wall, clock.seconds)
+        stats = _stats(runner, k0, wall, clock.seconds, used_threads)
         try:
             out_writer.close(
                 {
@@ -1090,7 +1137,9 @@ def _convergence_error(message: str, runner: Runner, t0: float, dt: float) -> Ex
     )
 
 
-def _stats(runner: Runner, k0: int, wall: float, compile_time: float) -> SolveStats:
+def _stats(
+    runner: Runner, k0: int, wall: float, compile_time: float, threads: dict[str, int]
+) -> SolveStats:
     fails = runner.failures
     taken = runner.k - k0
     member_steps = 0
@@ -1108,4 +1157,5 @@ def _stats(runner: Runner, k0: int, wall: float, compile_time: float) -> SolveSt
         wall_time=wall,
         compile_time=float(compile_time),
         runner=runner.label,
+        threads=threads,
     )

@@ -124,6 +124,13 @@ class Layout:
     restart_at_saves: bool = False
 
 
+def _load_scipy_blas() -> None:
+    """Load the BLAS the BLAS stage calls (numba's ``np.dot`` binds SciPy's cython BLAS, a
+    library of its own besides NumPy's) before the run starts, so that the run's thread limits
+    reach it from the first step (:mod:`isoflow.threads`)."""
+    import scipy.linalg.cython_blas  # noqa: F401
+
+
 def _plain(core: tuple[int, ...], dtype: Any) -> dict[str, Any]:
     def to_flat(Y: Array) -> Array:
         return np.array(Y, dtype=dtype, order="C", copy=True).reshape(Y.shape[0], -1)
@@ -167,6 +174,7 @@ def _dense_layout(problem: IsospectralProblem, kernel: Any) -> Layout | None:
             f"dense {alg.name} (written-out products)", dense.iterate_small, dense.finish,
             (n, s, traceless), 3, identity=identity, **maps,
         )  # fmt: skip
+    _load_scipy_blas()
     blocks, rowoff = dense.packed_row_offsets(n)
     return Layout(
         f"dense {alg.name} (BLAS)", dense.iterate_blas, dense.finish_blas,
@@ -345,12 +353,13 @@ class CompiledRunner(Runner):
         self._drive: Any = None
 
     def _threads_allowed(self) -> bool:
-        """Members may run on numba threads unless they call a multithreaded BLAS."""
+        """Members may run on numba threads unless they call a multithreaded BLAS (the BLAS
+        threads in force: those of the run's thread plan, :mod:`isoflow.threads`)."""
         if self.layout.iterate is not dense.iterate_blas:
             return True
-        from threadpoolctl import threadpool_info
+        from ..threads import blas_threads
 
-        return all(p.get("num_threads", 1) <= 1 for p in threadpool_info())
+        return blas_threads() <= 1
 
     # ---- method state <-> ring ---------------------------------------------------------------
     def _position_states(self, state: Any) -> list[Any]:
