@@ -12,9 +12,9 @@ from __future__ import annotations
 import atexit
 import contextlib
 import json
-import re
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
