@@ -50,6 +50,11 @@ class SolveStats:
         everything was compiled earlier in the process.
     runner : str
         What ran the steps: ``"NumPy"`` or ``"compiled, <layout>"``.
+    threads : dict
+        The threads the run used (:mod:`isoflow.threads`): ``"blas"``, the limit of every
+        BLAS and OpenMP library during the loop; ``"numba"``, the numba threads the compiled
+        loop ran its members (or chunks) on, 1 when it ran serially; ``"cores"``, the cores
+        the process could run on.
     """
 
     n_steps: int = 0
@@ -61,6 +66,7 @@ class SolveStats:
     wall_time: float = 0.0
     compile_time: float = 0.0
     runner: str = ""
+    threads: dict[str, int] = dataclasses.field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """Plain-Python dictionary (JSON-ready)."""

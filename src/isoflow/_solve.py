@@ -23,11 +23,12 @@ from ._errors import ParameterError, ShapeError, StepSizeError, TimeSpanError
 from ._failures import step_exception
 from ._save_grid import SaveGrid
 from ._solution import RUN_FAILED, RUN_FINISHED, RUN_INTERRUPTED, RunState, Solution, SolveStats
-from ._time_loop import open_run, run
+from ._time_loop import open_run, run, run_threads
 from ._writers import StreamWriter
 from .diagnostics import DiagnosticsAccumulator
 from .methods import Method
 from .problems import IsospectralProblem
+from .threads import ThreadRequest
 
 __all__ = [
     "RUN_FAILED",
@@ -225,6 +226,7 @@ def solve(
     progress: bool | None = None,
     throw: bool = True,
     writer: StreamWriter | None = None,
+    threads: ThreadRequest = None,
 ) -> Solution:
     r"""Integrate ``problem`` from ``y0`` with a fixed step (no adaptivity, by design).
 
@@ -261,6 +263,16 @@ def solve(
         the initial and the final one, and its ``diagnostics`` has the drifts over *all* saved
         states with the time series of those two states only.
 
+    threads : None, int or dict
+        Threads of the run (:mod:`isoflow.threads`), applied inside the loop to every BLAS and
+        OpenMP library and to numba. ``None`` (default): the enclosing
+        ``iso.threads.thread_limits`` block's choice, else one BLAS thread and numba threads
+        on every core for compiled loops that run ensemble members in parallel; ``k``: ``k``
+        cores (numba threads when the compiled loop runs members in parallel, else BLAS
+        threads); ``{"blas": b, "numba": m}``: both. Environment variables such as
+        ``OPENBLAS_NUM_THREADS`` are upper bounds; more threads than cores are refused
+        (:class:`ParameterError`). The counts used are in ``stats.threads``.
+
     Returns
     -------
     Solution
@@ -275,12 +287,12 @@ def solve(
     _check_objects(problem, method, writer)
     _check_save_every(save_every)
     dt_, n = time_grid(t0, t1, dt, n_steps)
-    with compile_clock(show=progress is not False) as clock:
+    with compile_clock(show=progress is not False) as clock, run_threads(threads) as pools:
         W = _check_state(problem, y0, "y0")
         start = RunState(0, W, method.init(problem, W, dt_))
         r = open_run(
             problem, method, start, t0=float(t0), dt=dt_, grid=SaveGrid(int(save_every), n),
-            diagnostics=diagnostics, writer=writer, fresh=True,
+            diagnostics=diagnostics, writer=writer, fresh=True, threads=(threads, pools),
         )  # fmt: skip
         return run(r, fresh=True, progress=progress, throw=throw, clock=clock)
 
@@ -366,16 +378,18 @@ def continue_run(
     accumulator: DiagnosticsAccumulator,
     progress: bool | None = None,
     throw: bool = True,
+    threads: ThreadRequest = None,
 ) -> Solution:
     """Continue a run validated by :func:`check_restart`, appending to ``writer``.
 
-    ``accumulator`` has absorbed the diagnostics of the rows already written.
+    ``accumulator`` has absorbed the diagnostics of the rows already written; ``threads`` is
+    as in :func:`solve`.
     """
     rs = restart
-    with compile_clock(show=progress is not False) as clock:
+    with compile_clock(show=progress is not False) as clock, run_threads(threads) as pools:
         r = open_run(
             rs.problem, rs.method, rs.state, t0=rs.t0, dt=rs.dt,
             grid=SaveGrid(rs.save_every, rs.n_steps), diagnostics=True, writer=writer,
-            fresh=False, accumulator=accumulator,
+            fresh=False, accumulator=accumulator, threads=(threads, pools),
         )  # fmt: skip
         return run(r, fresh=False, progress=progress, throw=throw, clock=clock)

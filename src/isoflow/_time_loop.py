@@ -46,6 +46,7 @@ from ._writers import PIPELINE_MIN_ROWS, PIPELINE_SECONDS, MemoryWriter, Sink, S
 from .diagnostics import DiagnosticsAccumulator
 from .methods import Method
 from .problems import IsospectralProblem
+from .threads import ThreadPools, ThreadRequest, plan_threads
 
 __all__ = [
     "CHUNK_BYTES",
@@ -55,6 +56,7 @@ __all__ = [
     "OpenRun",
     "open_run",
     "run",
+    "run_threads",
     "runner_for",
     "solution",
 ]
@@ -65,6 +67,27 @@ Array = NDArray[Any]
 CHUNK_SECONDS = 0.5
 #: Largest row buffer of one chunk, in bytes (larger states save fewer rows per chunk).
 CHUNK_BYTES = 64 * 2**20
+
+
+@contextmanager
+def run_threads(threads: ThreadRequest) -> Iterator[ThreadPools]:
+    """The run's thread counts (:mod:`isoflow.threads`) for the block: applied to numba and
+    every BLAS/OpenMP library before the runner is built (settled once it is, by
+    :func:`open_run`), restored at the end."""
+    pools = ThreadPools()
+    try:
+        pools.apply(plan_threads(threads, parallel=True))
+        yield pools
+    finally:
+        pools.restore()
+
+
+def _settle_threads(pools: ThreadPools, threads: ThreadRequest, runner: Runner) -> dict[str, int]:
+    """Apply the final thread counts for ``runner`` (a number of cores goes to numba when it
+    runs members in parallel, else to BLAS); return those it uses (``stats.threads``)."""
+    plan = plan_threads(threads, parallel=runner.parallel)
+    pools.apply(plan)
+    return {"cores": plan.cores, "numba": plan.numba if runner.parallel else 1, "blas": plan.blas}
 
 
 def runner_for(problem: IsospectralProblem, method: Method, state: RunState, dt: float) -> Runner:
@@ -154,6 +177,8 @@ class OpenRun:
     accumulator: DiagnosticsAccumulator
     memory: bool
     diagnostics: bool
+    pools: ThreadPools
+    threads: dict[str, int]
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -198,10 +223,11 @@ class OpenRun:
 def open_run(
     problem: IsospectralProblem, method: Method, start: RunState, *, t0: float, dt: float,
     grid: SaveGrid, diagnostics: bool, writer: StreamWriter | None, fresh: bool,
-    accumulator: DiagnosticsAccumulator | None = None,
+    threads: tuple[ThreadRequest, ThreadPools], accumulator: DiagnosticsAccumulator | None = None,
 ) -> OpenRun:  # fmt: skip
     """Build the runner, the writer and the sink of a run; open the writer of a fresh one
-    (a restart continues a writer holding the rows up to ``start.step``)."""
+    (a restart continues a writer holding the rows up to ``start.step``). ``threads`` is the
+    request and the pools of :func:`run_threads`."""
     alg = problem.algebra
     W = start.y
     memory = writer is None
@@ -214,13 +240,15 @@ def open_run(
         accumulator = DiagnosticsAccumulator(problem, keep_series=memory)
         accumulator.set_first_state(W)
     runner = runner_for(problem, method, start, dt)
+    request, pools = threads
+    used = _settle_threads(pools, request, runner)
     series = diagnostics or not memory
     background = (
         series and not runner.parallel and grid.count(runner.k, grid.k_final) >= PIPELINE_MIN_ROWS
     )
     sink = Sink(out, accumulator, series, background=background)
     r = OpenRun(problem, method, start, t0, dt, grid, runner, out, sink, accumulator, memory,
-                diagnostics)  # fmt: skip
+                diagnostics, pools, used)  # fmt: skip
     if fresh:
         try:
             out.open(r.meta())
@@ -307,6 +335,7 @@ def run(r: OpenRun, *, fresh: bool, progress: bool | None, throw: bool,
                     out = r.writer.rows(rows).reshape(rows, M, *alg.shape)
                 else:
                     out = np.empty((rows, M, *alg.shape), dtype=alg.dtype)
+                r.pools.refresh()  # limit a library the last chunk loaded (an import)
                 t_call = time.perf_counter()
                 runner.advance(nsteps, grid, out)
                 chunks.took(nsteps, time.perf_counter() - t_call)
@@ -350,7 +379,7 @@ def run(r: OpenRun, *, fresh: bool, progress: bool | None, throw: bool,
     finally:
         bar.close()
         r.sink.shutdown()
-        stats = _stats(runner, k0, time.perf_counter() - clock.started, clock.seconds)
+        stats = _stats(runner, k0, time.perf_counter() - clock.started, clock.seconds, r.threads)
         _close(r, outcome, stats)
     if outcome.error is not None:
         raise outcome.error
@@ -393,7 +422,9 @@ def _close(r: OpenRun, outcome: _Outcome, stats: SolveStats) -> None:
             raise ResultWriteError(f"closing the result file failed: {exc}") from exc
 
 
-def _stats(runner: Runner, k0: int, wall: float, compile_time: float) -> SolveStats:
+def _stats(
+    runner: Runner, k0: int, wall: float, compile_time: float, threads: dict[str, int]
+) -> SolveStats:
     fails = runner.failures
     taken = runner.k - k0
     member_steps = 0
@@ -411,6 +442,7 @@ def _stats(runner: Runner, k0: int, wall: float, compile_time: float) -> SolveSt
         wall_time=wall,
         compile_time=float(compile_time),
         runner=runner.label,
+        threads=threads,
     )
 
 

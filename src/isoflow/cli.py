@@ -113,23 +113,36 @@ _RUN_OPTIONS = ("method", "solver", "rtol", "anderson", "t0", "t1", "dt", "n_ste
 # ---- the parser --------------------------------------------------------------------------------
 
 
+def _add_thread_options(parser: argparse.ArgumentParser, default: Any = argparse.SUPPRESS) -> None:
+    """``--threads`` and ``--blas-threads`` (on the main parser and on every command that
+    computes; a command's own flags leave the main parser's value alone unless given)."""
+    parser.add_argument(
+        "--threads",
+        type=_positive_int,
+        default=default,
+        metavar="K",
+        help=(
+            "cores a run may use: numba threads when its compiled loop runs ensemble members "
+            "in parallel, else BLAS threads (default: 1 BLAS thread, numba on every core; "
+            "see iso.threads)"
+        ),
+    )
+    parser.add_argument(
+        "--blas-threads",
+        type=_positive_int,
+        default=default,
+        metavar="K",
+        help="BLAS/OpenMP threads (default 1); numba gets the cores they leave",
+    )
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="isoflow",
         description="Structure-preserving integration of isospectral flows (IsoMP).",
     )
     parser.add_argument("--version", action="version", version=f"isoflow {__version__}")
-    parser.add_argument(
-        "--blas-threads",
-        type=_positive_int,
-        default=None,
-        metavar="K",
-        help=(
-            "BLAS threads (default 1: the paper's states are small and idle BLAS threads "
-            "spin against the compiled kernels; raise it for large dense states); numba gets "
-            "the remaining cores (iso.threads.thread_limits)"
-        ),
-    )
+    _add_thread_options(parser, default=None)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     solvers = ", ".join(registry.SOLVERS)
@@ -156,6 +169,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "--anderson", type=_anderson, default=0, metavar="M", help="Anderson memory (0: plain)"
     )
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_thread_options(demo)
     demo.set_defaults(func=_demo, computes=True)
 
     models_help = "; ".join(f"{k}: {v.description}" for k, v in registry.MODELS.items())
@@ -226,6 +240,7 @@ def _build_parser() -> argparse.ArgumentParser:
         help="write at least this often (default 1 s)",
     )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_thread_options(run)
     run.set_defaults(func=_run, computes=True)
 
     info = sub.add_parser(
@@ -284,6 +299,7 @@ def _build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--quick", action="store_true", help="reduced versions (CI, a first look)")
     rep.add_argument("--no-pdf", action="store_true", help="PNG only")
     rep.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_thread_options(rep)
     rep.set_defaults(func=_reproduce, computes=True)
 
     lst = sub.add_parser(
@@ -335,6 +351,14 @@ def _table(rows: Sequence[tuple[str, str]]) -> list[str]:
     return [f"  {name:<{width}}  {value}" for name, value in rows]
 
 
+def _threads_text(threads: dict[str, Any]) -> str:
+    """``SolveStats.threads`` in words: ``"1 BLAS, 2 numba (2 cores)"``."""
+    return (
+        f"{threads.get('blas', '?')} BLAS, {threads.get('numba', '?')} numba "
+        f"({threads.get('cores', '?')} cores)"
+    )
+
+
 def _summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
     d = sol.diagnostics.summary() if sol.diagnostics is not None else {}
     st = sol.stats
@@ -346,6 +370,7 @@ def _summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
             + (f" (compiling {st.compile_time:.1f} s)" if st.compile_time > 0.5 else ""),
         ),
         ("runner", st.runner),
+        ("threads", _threads_text(st.threads)),
         ("iterations per step", f"mean {st.iterations_mean:.2f}, max {st.iterations_max}"),
         *((k, f"{v:.3e}") for k, v in d.items()),
         ("status", sol.message),
@@ -583,6 +608,8 @@ def _info(args: argparse.Namespace) -> int:
                 f"(iterations mean {st.get('iterations_mean', float('nan')):.2f})",
             )
         )
+        if isinstance(st.get("threads"), dict):  # older files do not record them
+            rows.append(("threads", _threads_text(st["threads"])))
     rows += [(k, f"{v:.3e}") for k, v in data["drifts"].items()]
     if sweep_note is not None:
         rows.append(("sweep", sweep_note))
@@ -819,7 +846,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return int(args.func(args))
         from .threads import thread_limits
 
-        with thread_limits(blas=args.blas_threads or 1):
+        if args.threads is not None and args.blas_threads is not None:
+            raise UserError("give --threads or --blas-threads, not both")
+        with thread_limits(blas=args.blas_threads, threads=args.threads):
             return int(args.func(args))
     except BrokenPipeError:  # the reader went away (isoflow list | head): stop quietly
         devnull = os.open(os.devnull, os.O_WRONLY)

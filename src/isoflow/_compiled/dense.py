@@ -240,6 +240,13 @@ blocks.provide_member_defaults(DenseSmall, DenseBlas)
 # ---- the layout of a run ----------------------------------------------------------------------
 
 
+def _load_scipy_blas() -> None:
+    """Load the BLAS the BLAS layout calls (numba's ``np.dot`` binds SciPy's cython BLAS, a
+    library of its own besides NumPy's) before the run starts, so that the run's thread limits
+    reach it from the first step (:mod:`isoflow.threads`)."""
+    import scipy.linalg.cython_blas  # noqa: F401
+
+
 def record(alg: Any) -> DenseSmall | DenseBlas:
     """The layout record of the dense space ``alg`` (written-out products up to
     :data:`SMALL_N`)."""
@@ -251,6 +258,7 @@ def record(alg: Any) -> DenseSmall | DenseBlas:
     traceless = bool(getattr(alg, "traceless", False))
     if n <= SMALL_N:
         return DenseSmall(n, s, traceless)
+    _load_scipy_blas()
     blocks_, rowoff = packed_row_offsets(n)
     return DenseBlas(n, s, traceless, rowoff, blocks_)
 

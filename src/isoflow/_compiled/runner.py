@@ -172,12 +172,13 @@ class CompiledRunner(Runner):
         self._drive: Any = None
 
     def _threads_allowed(self) -> bool:
-        """Units may run on numba threads unless they call a multithreaded BLAS."""
+        """Units may run on numba threads unless they call a multithreaded BLAS (the BLAS
+        threads in force: those of the run's thread plan, :mod:`isoflow.threads`)."""
         if not isinstance(self.layout.record, DenseBlas):
             return True
-        from threadpoolctl import threadpool_info
+        from ..threads import blas_threads
 
-        return all(p.get("num_threads", 1) <= 1 for p in threadpool_info())
+        return blas_threads() <= 1
 
     # ---- method state <-> ring ---------------------------------------------------------------
     def _position_states(self, state: Any) -> list[Any]:

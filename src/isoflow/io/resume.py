@@ -31,6 +31,7 @@ from .._solve import RunState, Solution, check_restart, continue_run
 from ..diagnostics import DiagnosticsAccumulator
 from ..methods import Method
 from ..problems import IsospectralProblem
+from ..threads import ThreadRequest, plan_threads
 from .lock import WriteLock
 from .reader import Checkpoint, iter_rows, open_result, read_checkpoint
 from .recovery import recover
@@ -104,6 +105,7 @@ def resume(
     chunk_rows: int = 256,
     flush_seconds: float = 1.0,
     force: bool = False,
+    threads: ThreadRequest = None,
 ) -> Solution:
     """Continue a streamed run from its last checkpoint, appending to the same file.
 
@@ -121,6 +123,8 @@ def resume(
     force : bool
         Resume although the model differs from the one the run started with (see
         :class:`~isoflow.ModelChangedError`); the file keeps the fingerprint of the first.
+    threads : None, int or dict
+        As in :func:`isoflow.solve`.
 
     Returns
     -------
@@ -143,7 +147,10 @@ def resume(
         of range, a model that is not built in); the file is left unchanged.
     NotInSpaceError
         The checkpoint state is not in the problem's space (as :func:`isoflow.solve`).
+    ParameterError
+        A malformed ``threads`` (checked before the file is touched).
     """
+    plan_threads(threads)  # a malformed request is refused before anything else
     p = Path(path)
     if p.is_symlink():
         p = Path(os.path.realpath(p))
@@ -188,4 +195,6 @@ def resume(
     finally:
         if not handed_over:
             lock.release()
-    return continue_run(restart, writer=writer, accumulator=acc, progress=progress, throw=throw)
+    return continue_run(
+        restart, writer=writer, accumulator=acc, progress=progress, throw=throw, threads=threads
+    )
