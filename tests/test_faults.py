@@ -246,8 +246,8 @@ def test_a_second_writer_gets_a_clear_error(tmp_path: Path) -> None:
             _solve(path, force=True)
         out = run_cli("run", "--resume", str(path), "--quiet")
         assert out.returncode == 1 and f"pid {proc.pid}" in one_error_line(out.stderr)
-        shown = run_cli("info", str(path)).stdout
-        assert "live" in shown and f"pid {proc.pid}" in shown
+        shown = run_cli("info", str(path))
+        assert "live" in shown.stdout and f"pid {proc.pid}" in shown.stdout, shown.stderr
     finally:
         proc.kill()
         proc.wait()
