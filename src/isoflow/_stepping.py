@@ -303,11 +303,10 @@ class PythonRunner(Runner):
             self._one_step(k, rest)
 
     def _one_step(self, k: int, alive: NDArray[np.intp]) -> None:
-        """Step ``k`` (from ``t0 + k h``) of the members ``alive``."""
+        """Step ``k`` (from ``t0 + k h``) of the ensemble members ``alive`` (one system steps
+        in :meth:`_advance_single`)."""
         everyone = alive.size == self.M
-        if self.single:
-            y, st = self.Y[0], self.mstate
-        elif everyone:
+        if everyone:
             y, st = self.Y, self.mstate
         else:
             y, st = self.Y[alive], take_members(self.mstate, alive, self.M)
@@ -335,20 +334,13 @@ class PythonRunner(Runner):
         for j in np.flatnonzero(~ok):
             self.failures.record(int(alive[j]), k, int(status[j]), int(iters[j]), float(resid[j]))
         if ok.all():
-            if self.single:
-                self.Y[0] = ynew[0]
-            elif everyone:
+            if everyone:
                 self.Y = ynew.copy() if ynew.base is not None else ynew
+                self.mstate = res.state
             else:
                 self.Y[alive] = ynew
-            self.mstate = (
-                res.state
-                if self.single or everyone
-                else merge_members(self.mstate, alive, res.state, self.M)
-            )
+                self.mstate = merge_members(self.mstate, alive, res.state, self.M)
             return
-        if self.single:
-            return  # the one member failed: frozen
         good = alive[ok]
         self.Y[good] = ynew[ok]
         sub = take_members(res.state, np.flatnonzero(ok), n)

@@ -314,9 +314,9 @@ def run(r: OpenRun, *, fresh: bool, progress: bool | None, throw: bool,
     )
     checkpoints = CheckpointPolicy(not r.memory, r.writer.chunk_rows, r.writer.flush_seconds)
     outcome = _Outcome(RUN_FINISHED, f"{n} steps of dt = {r.dt:g} completed")
-    bar = tqdm(
+    bar = tqdm(  # on a terminal after a second; at once when asked for
         total=n, initial=k0, disable=(None if progress is None else not progress),
-        delay=1.0, desc=r.method.name, unit="step", leave=False,
+        delay=1.0 if progress is None else 0.0, desc=r.method.name, unit="step", leave=False,
     )  # fmt: skip
     reported = runner.failures.failed.size
     last_good = (k0, np.array(r.start.y, copy=True).reshape(M, *alg.shape))  # last checked

@@ -205,17 +205,11 @@ class NonlinearSolver:
 
     #: Anderson memory (0: none); :class:`FixedPoint` sets it.
     anderson: int = 0
-    #: Evaluations of ``G`` per iteration and member beyond the first (Newton's Jacobian).
-    extra_evaluations_per_iteration: int = 0
 
     def _update(
         self, prob: FixedPointProblem, X: Array, GX: Array, mask: Array | None
     ) -> Array:  # pragma: no cover - abstract
         raise NotImplementedError
-
-    def evaluations_per_iteration(self, prob: FixedPointProblem) -> int:
-        """Evaluations of ``G`` (hence of ``B``) per iteration and member."""
-        return 1
 
     def solve(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
         """Solve ``X = G(X)`` starting from ``X0`` (not modified).
