@@ -190,10 +190,10 @@ def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
     dense_tiles._combine`: bracket, next iterate, residual, mirrored into ``V``), on one thread;
     repeated inside a compiled loop (about 2e6 entries a call) so that small ``n`` is not
     timed with a Python call's overhead."""
-    from isoflow._compiled import dense_tiles
+    from isoflow._compiled import dense
 
     n = alg.shape[0]
-    _, rowoff = dense_tiles.packed_row_offsets(n)
+    _, rowoff = dense.packed_row_offsets(n)
     Tp = np.zeros(n * n, dtype=X.dtype)
     G = np.empty_like(X)
     s = -1.0  # both spaces are skew

@@ -212,7 +212,7 @@ CASES: dict[str, tuple[Callable[[], tuple], iso.Method, float, int, int]] = {
 def test_lower_blocks_cover_the_rows_in_tile_aligned_pieces() -> None:
     """The triangular product's row blocks: contiguous, tile aligned, two or more from
     ``n = 2 * tile`` (one block is a full product), at most eight; packed size <= n^2."""
-    from isoflow._compiled import dense_tiles as dense
+    from isoflow._compiled import dense
 
     tile = dense._TILE
     for n in range(1, 1100, 7):

@@ -38,12 +38,25 @@ from ..kernels import ElementwiseLinear
 from . import blocks
 from .layout import Layout, member_layout
 
-__all__ = ["SMALL_N", "DenseBlas", "DenseSmall", "dense_layout", "remove_trace", "sigma_sign"]
+__all__ = [
+    "SMALL_N",
+    "DenseBlas",
+    "DenseSmall",
+    "dense_layout",
+    "lower_blocks",
+    "packed_row_offsets",
+    "remove_trace",
+    "sigma_sign",
+]
 
 #: Largest ``n`` for which the written-out products beat BLAS calls (measured, benchmark 10).
 SMALL_N = 16
 #: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
 _FM = {"reassoc", "nsz", "contract"}
+#: Tile edge of the mirrored passes of the BLAS layout's IsoMP (:mod:`.dense_tiles`).
+_TILE = 32
+#: Target row-block height of its triangular product (a multiple of ``_TILE``).
+_BLOCK = 128
 
 
 class DenseSmall(NamedTuple):
@@ -74,6 +87,33 @@ def sigma_sign(alg: Any) -> float | None:
     if isinstance(alg, (Symmetric, Hermitian)):
         return 1.0
     return None
+
+
+def lower_blocks(n: int, block: int = _BLOCK) -> list[tuple[int, int]]:
+    """Row ranges ``(r0, r1)`` of the lower-block-triangular product, tile aligned.
+
+    At least two blocks once ``n >= 2 * _TILE`` (one block is a full product), at most eight.
+    """
+    nb = min(8, max(2 if n >= 2 * _TILE else 1, round(n / block)))
+    size = -(-n // nb)
+    size = -(-size // _TILE) * _TILE
+    return [(r0, min(n, r0 + size)) for r0 in range(0, n, size)]
+
+
+def packed_row_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(blocks, rowoff)``: the blocks as an ``(nb, 2)`` array and, for each row ``i`` of
+    block ``(r0, r1)``, the offset of its ``r1`` entries in the packed ``T``.
+
+    The packed size ``sum (r1 - r0) r1`` never exceeds ``n^2``.
+    """
+    blocks = lower_blocks(n)
+    rowoff = np.empty(n, dtype=np.int64)
+    off = 0
+    for r0, r1 in blocks:
+        for i in range(r0, r1):
+            rowoff[i] = off + (i - r0) * r1
+        off += (r1 - r0) * r1
+    return np.asarray(blocks, dtype=np.int64), rowoff
 
 
 # ---- blocks -----------------------------------------------------------------------------------
@@ -250,8 +290,6 @@ def _load_scipy_blas() -> None:
 def record(alg: Any) -> DenseSmall | DenseBlas:
     """The layout record of the dense space ``alg`` (written-out products up to
     :data:`SMALL_N`)."""
-    from .dense_tiles import packed_row_offsets
-
     s = sigma_sign(alg)
     assert s is not None
     n = alg.shape[0]

@@ -7,14 +7,14 @@ the products, measured in benchmarks 3, 10 and 12 (an iteration at ``n >= 256`` 
 0.9-1.14 times two bare products): :math:`T = BXB` lies in ``V`` (``B`` is skew), so only its
 lower block triangle is computed, block row by block row, as
 :math:`T_{[r_0, r_1), [0, r_1)} = -P_{[r_0,r_1)}\, \overline{B}_{[0, r_1)}^{\,T}`
-(:func:`lower_blocks`); the rest (bracket, iterate, residual, mirrored into ``V``) is one
-cache-blocked pass over pairs of mirrored tiles. Every iterate and state stays in ``V`` to the
-last bit.
+(:func:`isoflow._compiled.dense.lower_blocks`); the rest (bracket, iterate, residual, mirrored
+into ``V``) is one cache-blocked pass over pairs of mirrored tiles. Every iterate and state
+stays in ``V`` to the last bit.
 
 ``lay.blocks`` holds the ``(nb, 2)`` row ranges of the triangular product and ``lay.rowoff[i]``
 the offset of row ``i`` of the packed lower-block-triangular ``T`` in the scratch row
-``work[1]`` (:func:`packed_row_offsets`). Three scratch rows: ``B``, the packed ``T`` and
-``conj(B)``.
+``work[1]`` (:func:`isoflow._compiled.dense.packed_row_offsets`). Three scratch rows: ``B``,
+the packed ``T`` and ``conj(B)``.
 """
 
 from __future__ import annotations
@@ -24,45 +24,14 @@ import math
 import numba
 import numpy as np
 
-from .dense import remove_trace
+from .dense import _TILE, remove_trace
 
-__all__ = ["NWORK", "finish", "iterate", "lower_blocks", "packed_row_offsets"]
+__all__ = ["NWORK", "finish", "iterate"]
 
 #: Scratch rows per member.
 NWORK = 3
 #: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
 _FM = {"reassoc", "nsz", "contract"}
-#: Tile edge of the mirrored passes.
-_TILE = 32
-#: Target row-block height of the triangular product (a multiple of ``_TILE``).
-_BLOCK = 128
-
-
-def lower_blocks(n: int, block: int = _BLOCK) -> list[tuple[int, int]]:
-    """Row ranges ``(r0, r1)`` of the lower-block-triangular product, tile aligned.
-
-    At least two blocks once ``n >= 2 * _TILE`` (one block is a full product), at most eight.
-    """
-    nb = min(8, max(2 if n >= 2 * _TILE else 1, round(n / block)))
-    size = -(-n // nb)
-    size = -(-size // _TILE) * _TILE
-    return [(r0, min(n, r0 + size)) for r0 in range(0, n, size)]
-
-
-def packed_row_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(blocks, rowoff)``: the blocks as an ``(nb, 2)`` array and, for each row ``i`` of
-    block ``(r0, r1)``, the offset of its ``r1`` entries in the packed ``T``.
-
-    The packed size ``sum (r1 - r0) r1`` never exceeds ``n^2``.
-    """
-    blocks = lower_blocks(n)
-    rowoff = np.empty(n, dtype=np.int64)
-    off = 0
-    for r0, r1 in blocks:
-        for i in range(r0, r1):
-            rowoff[i] = off + (i - r0) * r1
-        off += (r1 - r0) * r1
-    return np.asarray(blocks, dtype=np.int64), rowoff
 
 
 @numba.njit(cache=True, inline="always")
