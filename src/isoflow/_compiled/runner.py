@@ -40,7 +40,7 @@ from .particles import particle_layout
 from .records import Plan, SolverConstants, no_step_data
 from .signatures import DriverTypes, compiled_driver, no_begin
 from .spin_chain import chain_layout
-from .stages import CompiledStage, StageOnLayout, stage_for
+from .stages import CompiledStage, StageOnLayout, StepDataRequest, stage_for
 from .vortices import vortex_layout
 
 __all__ = ["CompiledRunner", "compiled_runner", "layout_for"]
@@ -140,6 +140,9 @@ class CompiledRunner(Runner):
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
         self.mp = stage.params(method, problem)
+        self.stage = stage
+        self.method = method
+        self.problem = problem
         self.solver = SolverConstants.of(method.solver)
         self.kmax = stage.offsets(method)
         K = max(self.kmax, 1)
@@ -365,12 +368,30 @@ class CompiledRunner(Runner):
             None if units.stop is None else units.stop * L,
         )
         plan = Plan.of(self.h, nsteps, k0, grid, self.kmax, self.impl.begin is not None)
-        data = no_step_data(nsteps, len(range(*members.indices(self.U * L))))
+        data = self._step_data(k0, nsteps, members)
         return (
             self.layout.record, self.mp, self.impl.nwork, self.W[units], self.ring[units],
             self.head[units], self.nh[units], self.coefs, self.gammas, plan, data, rows,
             self.solver, self.rec[members],
         )  # fmt: skip
+
+    def _step_data(self, k0: int, nsteps: int, members: slice) -> Array:
+        """The stage's step data of the steps ``k0 + 1 ..`` for the units' ``members`` (their
+        lanes; padding lanes are member ``-1``), or none."""
+        idx = np.arange(self.U * self.layout.lanes)[members]
+        if self.stage.step_data is None:
+            return no_step_data(nsteps, idx.size)
+        idx = np.where(idx < self.M, idx, -1)
+        request = StepDataRequest(int(k0), int(nsteps), idx, self.h)
+        data = np.ascontiguousarray(
+            self.stage.step_data(self.method, self.problem, request), dtype=np.float64
+        )
+        if data.ndim != 3 or data.shape[:2] != (nsteps, idx.size):
+            raise IsoflowError(
+                f"the step data of {self.stage.name} has shape {data.shape}, not "
+                f"({nsteps}, {idx.size}, D)"
+            )
+        return data
 
     def _advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         buf = self._rows_buffer(out)
