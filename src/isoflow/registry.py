@@ -50,10 +50,20 @@ import numpy as np
 
 from ._errors import IsoflowError
 from ._solve import time_grid
-from .methods import RK4, ClassicalMidpoint, Composition, IsoMP, IsoSyRK, Method, SphericalMidpoint
+from .methods import (
+    RK4,
+    ClassicalMidpoint,
+    Composition,
+    IsoMP,
+    IsoSyRK,
+    Method,
+    SphericalMidpoint,
+    Strang,
+)
 from .methods.composition import SCHEMES
 from .nonlinear import FixedPoint, Newton, NonlinearSolver
 from .problems import IsospectralProblem
+from .splitting import data_widths, has_split_part
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -78,6 +88,7 @@ __all__ = [
     "normalize_config",
     "parse_param",
     "read_toml",
+    "split_method",
 ]
 
 #: Entry-point group under which installed packages register models by name.
@@ -377,6 +388,30 @@ def _seed(help_: str = "seed of the random initial data") -> Param:
     return Param(int, 0, help_, low=0)
 
 
+def _sphere_data_params(what: str) -> dict[str, Param]:
+    """The initial data, dissipation and forcing parameters of the sphere models."""
+    return {
+        "seed": _seed(f"seed of the random initial {what}"),
+        "lmin": Param(int, 1, f"lowest degree of the random initial {what}", low=1),
+        "lmax": Param(
+            int, None, f"highest degree of the random initial {what} (min(10, N-1))", low=1
+        ),
+        "slope": Param(float, None, "energy spectrum E_l ~ l^slope of the data (white if unset)"),
+        "rms": Param(float, 1.0, f"root-mean-square initial {what}", low=0.0),
+        "viscosity": Param(float, None, "viscosity nu (nu Delta)", low=0.0),
+        "hyperviscosity": Param(
+            float, None, "hyperviscosity nu_p, p: -nu_p (-Delta)^p, p >= 1", low=0.0, length=2
+        ),
+        "drag": Param(float, None, "linear drag alpha", low=0.0),
+        "forcing_band": Param(
+            int, None, "white-noise forcing of the degrees lf - dl .. lf + dl: lf, dl", low=0,
+            length=2,
+        ),
+        "energy_rate": Param(float, None, "mean energy injection of the forcing band", low=0.0),
+        "forcing_seed": Param(int, None, "seed of the forcing noise", low=0),
+    }
+
+
 #: Largest matrix size ``n`` of a dense model from the command line (a state of 32 MiB, real).
 DENSE_MAX_N = 2048
 
@@ -458,20 +493,28 @@ MODELS: dict[str, ModelSpec] = {
             {
                 "N": _size("matrix size of su(N): degrees l <= N - 1", 128, 2, DENSE_MAX_N),
                 "omega": Param(float, 0.0, "angular velocity of the sphere"),
-                "seed": _seed("seed of the random initial vorticity"),
-                "lmin": Param(int, 1, "lowest degree of the random initial vorticity", low=1),
-                "lmax": Param(
-                    int,
-                    None,
-                    "highest degree of the random initial vorticity (min(10, N-1))",
-                    low=1,
+                **_sphere_data_params("vorticity"),
+                "double_bracket": Param(
+                    float, None, "selective decay: energy dissipated, Casimirs kept", low=0.0
                 ),
-                "slope": Param(
-                    float, None, "energy spectrum E_l ~ l^slope of the data (white if unset)"
-                ),
-                "rms": Param(float, 1.0, "root-mean-square initial vorticity", low=0.0),
             },
             "Zeitlin's quantized Euler equations on the (rotating) sphere, su(N)",
+            builtin=True,
+            initial=("seed", "lmin", "lmax", "slope", "rms"),
+        ),
+        ModelSpec(
+            "qg-sphere",
+            "isoflow.models:qg_sphere",
+            {
+                "N": _size("matrix size of su(N): degrees l <= N - 1", 128, 2, DENSE_MAX_N),
+                "lamb": Param(float, 0.0, "Lamb parameter F (0: Euler)", low=0.0),
+                "omega": Param(float, 0.0, "angular velocity of the sphere"),
+                "deformation_radius": Param(
+                    float, None, "Helmholtz variant: kappa = 1/deformation_radius", low=0.0
+                ),
+                **_sphere_data_params("potential vorticity"),
+            },
+            "shallow-water quasi-geostrophic model on the rotating sphere, su(N)",
             builtin=True,
             initial=("seed", "lmin", "lmax", "slope", "rms"),
         ),
@@ -702,6 +745,8 @@ EXPERIMENTS: dict[str, str] = {
         "vortices-invariants",
         "euler-sphere",
         "work-precision",
+        "forced-turbulence",
+        "qg-jets",
     )
 }
 
@@ -940,7 +985,9 @@ def build(
     Parameters
     ----------
     config : mapping
-        A run configuration (checked with :func:`normalize_config`).
+        A run configuration (checked with :func:`normalize_config`). A model with
+        dissipation or forcing (a linear part or forcing terms) gets the configured method as
+        the isospectral part of a split step (:func:`split_method`).
     model : ModelSpec, optional
         Required when the configuration names a model that is not built in: this function
         never imports a module because a configuration (e.g. one read from a result file)
@@ -969,10 +1016,22 @@ def build(
     else:
         solver = None
     method = make_method(cfg["method"], solver)
+    if has_split_part(problem):  # dissipation or forcing: the method runs as a split step
+        method = split_method(method, problem)
     kwargs: dict[str, Any] = {
         k: cfg[k] for k in ("t0", "dt", "t1", "n_steps", "save_every") if k in cfg
     }
     return problem, np.asarray(y0), method, kwargs
+
+
+def split_method(method: Method, problem: IsospectralProblem) -> Method:
+    """The split step of ``method`` for a problem with a linear part or forcing:
+    ``Strang(method)``, and for a composition the composition of the split step
+    (``Composition(Strang(base), scheme)``, of the composition's order) unless the forcing has
+    step data (time-dependent amplitudes, noise), which belong to whole steps."""
+    if isinstance(method, Composition) and sum(data_widths(problem)) == 0:
+        return Composition(Strang(method.base), method.scheme)
+    return Strang(method)
 
 
 def check_recorded_model(

@@ -23,6 +23,8 @@ _WHERE = {
     "jacobi_coefficients": "toda",
     "jacobi_matrix": "toda",
     "off_band": "toda",
+    "qg_operator": "qg_sphere",
+    "qg_sphere": "qg_sphere",
     "rigid_body": "rigid_body",
     "sphere_vortices": "sphere_vortices",
     "spin_lattice": "spin_lattice",
