@@ -672,13 +672,13 @@ def _warnings_as_lines() -> Iterator[None]:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from .sweep import read_spec, sweep
+    from .sweep import read_spec, run
     from .sweep.spec import require_extra
 
     require_extra("dask", "distributed", "xarray")
     spec = read_spec(args.file)
     with _warnings_as_lines():
-        result = sweep(
+        result = run(
             spec,
             args.out,
             scheduler=args.scheduler,
