@@ -294,7 +294,7 @@ print(json.dumps(out))
 def test_more_workers_than_cores_are_capped_with_a_warning(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from isoflow.cli import _warnings_as_lines
+    from isoflow.cli._common import warnings_as_lines
     from isoflow.sweep.submit import _capped_workers
     from isoflow.threads import available_cores
 
@@ -302,7 +302,7 @@ def test_more_workers_than_cores_are_capped_with_a_warning(
     with pytest.warns(RuntimeWarning, match=f"workers = 999 is more than the {cores} cores"):
         assert _capped_workers(999) == cores
     assert _capped_workers(None) == cores and _capped_workers(1) == 1
-    with _warnings_as_lines():  # as isoflow sweep shows it
+    with warnings_as_lines():  # as isoflow sweep shows it
         assert _capped_workers(999) == cores
     err = capsys.readouterr().err
     assert err.startswith(f"isoflow: warning: workers = 999 is more than the {cores} cores")
