@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import NonFiniteError, ParameterError, ShapeError
-from ._basis import _coefficient_array, _lmax_of, to_coefficients
+from ._basis import coefficient_array, lmax_of, to_coefficients
 from ._grid import default_grid_shape, evaluate, synthesize
 from ._operators import check_N
 
@@ -51,8 +51,8 @@ def _coefficients(data: ArrayLike) -> Array:
         if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
             raise ShapeError(f"expected (*batch, N, N) vorticity matrices, got {arr.shape}")
         return to_coefficients(arr)
-    c = _coefficient_array(arr, "coefficients")
-    _lmax_of(c.shape[-1], "coefficients")
+    c = coefficient_array(arr, "coefficients")
+    lmax_of(c.shape[-1], "coefficients")
     return c
 
 
@@ -132,7 +132,7 @@ def draw_map(
     if c.ndim != 1:
         raise ShapeError(f"draw_map: give one vorticity field, got shape {c.shape}")
     vmax = _vmax(vmax, "draw_map")
-    lmax = _lmax_of(c.shape[-1], "draw_map")
+    lmax = lmax_of(c.shape[-1], "draw_map")
     dt, dp = default_grid_shape(lmax)
     ntheta = max(dt, 90) if ntheta is None else check_N(ntheta, "draw_map: ntheta", minimum=2)
     nphi = max(dp, 180) if nphi is None else check_N(nphi, "draw_map: nphi", minimum=1)
@@ -276,7 +276,7 @@ def plot_orthographic(
     check_N(resolution, "plot_orthographic: resolution", minimum=3)
     lim = _vmax(vmax, "plot_orthographic")
     if lim is None:
-        lim = float(np.max(np.abs(synthesize(c, *default_grid_shape(_lmax_of(c.size, "c"))))))
+        lim = float(np.max(np.abs(synthesize(c, *default_grid_shape(lmax_of(c.size, "c"))))))
     fig = Figure(figsize=(3.6 * len(centers) + 0.8, 3.9), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(centers)))
     im: Any = None
@@ -500,7 +500,7 @@ def animate(
         raise ShapeError(f"animate: expected a sequence of states, got coefficients {c.shape}")
     n = c.shape[0]
     times = None if ts is None else _series(ts, n, "animate: ts")
-    lmax = _lmax_of(c.shape[-1], "animate")
+    lmax = lmax_of(c.shape[-1], "animate")
     if vmax is None:
         vmax = float(np.max(np.abs(synthesize(c, *default_grid_shape(lmax)))))
     fig = Figure(figsize=(7.5, 4.0) if kind == "map" else (5.0, 5.0), layout="constrained")
