@@ -534,9 +534,22 @@ def _fmt(value: Any) -> str:
     return "" if value is None else str(value)
 
 
+def drop_type_docstrings(
+    app: Any, what: str, name: str, obj: Any, options: Any, lines: list
+) -> None:
+    """Drop the docstring of a constant's type (``int([x]) -> integer ...``), which autodoc
+    shows for a constant without a ``#:`` comment in the module it reads (one re-exported from
+    another module): the page gives the comment found where it is defined, or says what the
+    constant is (:func:`write_api_pages`)."""
+    doc = getattr(type(obj), "__doc__", None)
+    if what == "data" and doc and " ".join(" ".join(lines).split()) == " ".join(doc.split()):
+        lines.clear()
+
+
 def setup(app: Any) -> dict[str, Any]:
     app.connect("builder-inited", write_api_pages)
     app.connect("missing-reference", resolve_short_names)
     app.connect("autodoc-process-docstring", escape_type_stars, priority=400)
+    app.connect("autodoc-process-docstring", drop_type_docstrings, priority=300)
     app.add_directive("benchmark-table", BenchmarkTable)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
