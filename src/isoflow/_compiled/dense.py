@@ -38,7 +38,16 @@ from ..kernels import ElementwiseLinear
 from . import blocks
 from .layout import Layout, member_layout
 
-__all__ = ["SMALL_N", "DenseBlas", "DenseSmall", "dense_layout", "remove_trace", "sigma_sign"]
+__all__ = [
+    "SMALL_N",
+    "DenseBlas",
+    "DenseSmall",
+    "dense_layout",
+    "mirror_sum",
+    "product",
+    "remove_trace",
+    "sigma_sign",
+]
 
 #: Largest ``n`` for which the written-out products beat BLAS calls (measured, benchmark 10).
 SMALL_N = 16
@@ -86,8 +95,9 @@ def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _mirror_sum(lay, C):  # type: ignore[no-untyped-def]
-    """``C = P + sigma(P)`` in place (``C`` holds ``P``), pair by pair."""
+def mirror_sum(lay, C):  # type: ignore[no-untyped-def]
+    """``C = P + sigma(P)`` in place (``C`` holds ``P``), pair by pair (``lay``: any record
+    with ``n`` and the sign ``s`` of sigma; also the pair layouts' brackets)."""
     n = lay.n
     s = lay.s
     Cm = C.reshape((n, n))
@@ -102,8 +112,8 @@ def _mirror_sum(lay, C):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)
-def _product(n, A, B, out):  # type: ignore[no-untyped-def]
-    """``out = A B`` (written out, ``n x n`` views)."""
+def product(n, A, B, out):  # type: ignore[no-untyped-def]
+    """``out = A B`` (written out, ``n x n`` views; also the pair layouts' small products)."""
     for i in range(n):
         for j in range(n):
             out[i, j] = 0.0
@@ -118,16 +128,16 @@ def _bracket_triple_small(lay, B, X, C, T):  # type: ignore[no-untyped-def]
     n = lay.n
     Bm = B.reshape((n, n))
     Cm = C.reshape((n, n))
-    _product(n, Bm, X.reshape((n, n)), Cm)
-    _product(n, Cm, Bm, T.reshape((n, n)))
-    _mirror_sum(lay, C)
+    product(n, Bm, X.reshape((n, n)), Cm)
+    product(n, Cm, Bm, T.reshape((n, n)))
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always")
 def _bracket_small(lay, B, X, C):  # type: ignore[no-untyped-def]
     n = lay.n
-    _product(n, B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
-    _mirror_sum(lay, C)
+    product(n, B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always")
@@ -137,14 +147,14 @@ def _bracket_triple_blas(lay, B, X, C, T):  # type: ignore[no-untyped-def]
     Cm = C.reshape((n, n))
     np.dot(Bm, X.reshape((n, n)), Cm)
     np.dot(Cm, Bm, T.reshape((n, n)))
-    _mirror_sum(lay, C)
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always")
 def _bracket_blas(lay, B, X, C):  # type: ignore[no-untyped-def]
     n = lay.n
     np.dot(B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
-    _mirror_sum(lay, C)
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)

@@ -11,7 +11,9 @@ method's own code, :class:`~isoflow._stepping.PythonRunner`). A compiled path ex
   ``so(n)``, ``u(n)``, ``su(n)``, ``Sym(n)``, ``Herm(n)`` (:mod:`.dense`; ensembles of an
   elementwise kernel as SIMD lanes, :mod:`.lanes`), :math:`(\mathbb{R}^3,\times)^N` and
   :math:`(\mathbb{R}^3,\times_L)^N` (:mod:`.particles`; point vortices, :mod:`.vortices`; spin
-  chains, :mod:`.spin_chain`); single systems and ensembles (units over numba threads).
+  chains, :mod:`.spin_chain`), the semidirect products of ``so(n)``, ``u(n)``, ``su(n)`` and
+  the heavy top's :math:`\mathfrak{se}(3)` (:mod:`.pairs`); single systems and ensembles
+  (units over numba threads).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from . import driver
 from .dense import DenseBlas, dense_layout
 from .lanes import lanes_layout
 from .layout import Layout
+from .pairs import PairsBlas, pair_layout
 from .particles import particle_layout
 from .records import Plan, SolverConstants, no_step_data
 from .signatures import DriverTypes, compiled_driver, no_begin
@@ -44,6 +47,7 @@ from .vortices import vortex_layout
 __all__ = ["CompiledRunner", "compiled_runner", "layout_for"]
 
 Array = NDArray[Any]
+
 
 def _threads() -> int:
     import numba
@@ -62,6 +66,7 @@ def layout_for(
         lambda: lanes_layout(problem, members) if anderson == 0 else None,
         lambda: dense_layout(problem, members),
         lambda: particle_layout(problem, members),
+        lambda: pair_layout(problem, members),
     ]
     for build in builders:
         layout = build()
@@ -162,7 +167,7 @@ class CompiledRunner(Runner):
 
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS."""
-        if not isinstance(self.layout.record, DenseBlas):
+        if not isinstance(self.layout.record, (DenseBlas, PairsBlas)):
             return True
         from threadpoolctl import threadpool_info
 
@@ -233,7 +238,9 @@ class CompiledRunner(Runner):
         driver for its signature (compiled, or loaded from numba's cache, once per process
         and signature: :func:`~isoflow._compiled.signatures.compiled_driver`)."""
         impl = self.impl
-        dt = DriverTypes(self.f, self.fargs, self.layout.record, self.mp, self.W.dtype)
+        dt = DriverTypes(
+            self.f, self.fargs, self.layout.record, self.mp, self.W.dtype, len(self.core)
+        )
         dt.compile_stage(self.begin, impl.iterate, impl.finish)
         return compiled_driver(dt.driver_signature(args), self.parallel)
 
