@@ -650,6 +650,7 @@ EXPERIMENTS: dict[str, str] = {
         "vortices-trajectories",
         "vortices-invariants",
         "euler-sphere",
+        "mhd-sphere",
         "work-precision",
     )
 }
