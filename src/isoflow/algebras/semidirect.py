@@ -145,11 +145,12 @@ class _Pairs:
         return self.pair(self._field_dagger(g1), self._field_dagger(g0))
 
     def validate(
-        self, W: ArrayLike, what: str = "state", rtol: float = 1e-10, atol: float = 1e-12
-    ) -> Array:
+        self, W: ArrayLike, what: str = "state", rtol: float = 1e-10, atol: float = 1e-12,
+        *, project: bool = True,
+    ) -> Array:  # fmt: skip
         """:meth:`Algebra.validate`, with a state outside the space blamed on its field."""
         try:
-            return super().validate(W, what, rtol, atol)  # type: ignore[misc, no-any-return]
+            return super().validate(W, what, rtol, atol, project=project)  # type: ignore[misc, no-any-return]
         except NotInSpaceError as exc:
             fields = self.split(np.asarray(W).astype(self.dtype))
             dists = [float(np.max(self._field_distance(F))) for F in fields]
