@@ -296,9 +296,9 @@ def test_a_restart_continues_the_stored_state_not_a_reprojection() -> None:
     moved = [y for y in sol.ys if alg.project(y).tobytes() != y.tobytes()]
     assert moved  # the case that needs it
     y = moved[0]
-    _, _, state = check_restart(prob, iso.IsoMP(), RunState(3, y, None), t0=0.0, dt=0.05,
-                                n_steps=30, save_every=1)  # fmt: skip
-    assert state.y.tobytes() == y.tobytes()
+    restart = check_restart(prob, iso.IsoMP(), RunState(3, y, None), t0=0.0, dt=0.05,
+                            n_steps=30, save_every=1)  # fmt: skip
+    assert restart.state.y.tobytes() == y.tobytes()
     with pytest.raises(iso.NotInSpaceError, match="checkpoint state is not in su"):
         check_restart(prob, iso.IsoMP(), RunState(3, y + 1e-3, None), t0=0.0, dt=0.05,
                       n_steps=30, save_every=1)  # fmt: skip
