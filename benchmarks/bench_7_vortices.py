@@ -115,14 +115,16 @@ def _stage_loop() -> Any:
     import numba
 
     @numba.njit
-    def loop(iterate, finish, f, fargs, sp, W, X, G, aux, work, Wn, h, its, n):  # type: ignore[no-untyped-def]
-        half, quarter = 0.5 * h, 0.25 * h * h
+    def loop(iterate, finish, f, fargs, lay, mp, W, X, G, aux, work, Wn, h, its, n):  # type: ignore[no-untyped-def]
+        sd = np.empty((1, 0))
+        rr = np.zeros(1)
+        fin = np.ones(1, dtype=np.bool_)
         for _ in range(n):
             X[:] = W
             for _ in range(its):
-                iterate(f, fargs, sp, W, X, G, aux, work, half, quarter)
+                iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr)
                 X, G = G, X
-            finish(f, fargs, sp, W, X, aux, work, h, Wn)
+            finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin)
             W[:] = Wn
 
     return loop
@@ -138,11 +140,12 @@ def _stage_only_seconds(runner: Any, its: int, h: float, n: int) -> float:
     every kernel without compiling per kernel).
     """
     loop = _stage_loop()
-    L = runner.layout
+    impl = runner.impl
     W = runner.W[0].copy()
     X, G, aux, Wn = (np.empty_like(W) for _ in range(4))
-    work = np.empty((max(L.nwork, 1), W.shape[0]), dtype=W.dtype)
-    args = (L.iterate, L.finish, runner.f, runner.fargs, L.sp, W, X, G, aux, work, Wn, h, its)
+    work = np.empty((max(impl.nwork, 1), W.shape[0]), dtype=W.dtype)
+    args = (impl.iterate, impl.finish, runner.f, runner.fargs, runner.layout.record, runner.mp,
+            W, X, G, aux, work, Wn, h, its)  # fmt: skip
     loop(*args, 1)
     best = np.inf
     for _ in range(5):

@@ -37,6 +37,7 @@ import numpy as np
 
 import isoflow as iso
 from isoflow._compiled import compiled_runner
+from isoflow._save_grid import SaveGrid
 from isoflow._stepping import PythonRunner
 from suite import combining_pass_seconds, two_products
 
@@ -98,7 +99,7 @@ def _runner_steps(runner: Any, n: int) -> Callable[[], int]:
 
     def go() -> int:
         before = runner.iterations_total
-        runner.advance(n, 10**12, 10**15, out)
+        runner.advance(n, SaveGrid(10**12, 10**15), out)
         return runner.iterations_total - before
 
     return go

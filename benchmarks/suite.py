@@ -38,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from isoflow._save_grid import SaveGrid
+
 HERE = Path(__file__).resolve().parent
 
 __all__ = [
@@ -185,7 +187,7 @@ def _two_products_compiled() -> Any:
 
 def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
     """Best time of the compiled loop's pass after the two products (:func:`isoflow._compiled.
-    dense._combine`: bracket, next iterate, residual, mirrored into ``V``), on one thread;
+    dense_tiles._combine`: bracket, next iterate, residual, mirrored into ``V``), on one thread;
     repeated inside a compiled loop (about 2e6 entries a call) so that small ``n`` is not
     timed with a Python call's overhead."""
     from isoflow._compiled import dense
@@ -210,9 +212,9 @@ def combining_pass_seconds(alg: Any, X: Any, P: Any) -> float:
 def _combine_loop() -> Any:
     import numba
 
-    from isoflow._compiled import dense
+    from isoflow._compiled import dense_tiles
 
-    combine = dense._combine
+    combine = dense_tiles._combine
 
     @numba.njit
     def loop(W, X, P, Tp, rowoff, G, s, reps):  # type: ignore[no-untyped-def]
@@ -294,7 +296,7 @@ class StepTimer:
         r = self.runner
         before = r.iterations_total
         out = np.empty((1, r.M, *r.core), dtype=self.dtype)
-        r.advance(n, 2**62, r.k + n, out)
+        r.advance(n, SaveGrid(2**62, r.k + n), out)
         if not r.failures.alive.all():
             m = int(r.failures.failed[0])
             raise RuntimeError(f"a benchmark run failed ({r.label}): {r.failures.reason(m)}")

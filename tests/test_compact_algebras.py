@@ -3,8 +3,8 @@ r"""The compact vector forms (R^3, x)^N and (R^3, x_L)^N against their matrix al
 Every identity the vector forms rely on is checked against the hat / phi matrices, and one step
 of IsoMP on the vector forms is compared with one step of the *matrix* IsoMP on so(3) (so(3N)
 block-diagonal for coupled problems) and sl(2,R) (sp(2N) for coupled problems) to 1e-14. These
-would catch the misprints listed in NOTES.md (sign of the h^2 term, the printed M(a, b, c), the
-anti-isomorphism phi).
+would catch the misprints listed in the corrections to the paper (``docs/theory/method.rst``: the
+sign of the h^2 term, the printed M(a, b, c), the anti-isomorphism phi).
 """
 
 from __future__ import annotations

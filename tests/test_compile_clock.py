@@ -55,7 +55,11 @@ prob = iso.IsospectralProblem(algebra=alg, kernel=iso.CompiledB(f, (C,)))
 start = time.perf_counter()
 sol = iso.solve(prob, iso.IsoMP(), alg.random(0), dt=0.1, n_steps=20)
 wall = time.perf_counter() - start
-print(json.dumps({{"wall": wall, "compile_time": sol.stats.compile_time,
+import numba
+start = time.perf_counter()
+numba.njit(f.py_func).compile(f.signatures[0])  # the user's function alone, compiled again
+user = time.perf_counter() - start
+print(json.dumps({{"wall": wall, "user": user, "compile_time": sol.stats.compile_time,
                   "wall_time": sol.stats.wall_time, "runner": sol.stats.runner,
                   "cache": f._cache._cache_path}}))
 """
@@ -82,8 +86,9 @@ def test_a_new_kernel_is_announced_on_stderr_and_counted_then_loaded_silently(
     assert first["runner"].startswith("compiled"), first
     assert f"isoflow: compiling {name} (first use of this code here;" in err, err
     assert f"isoflow: compiled {name} in " in err, err
-    # compiling the user's function (in the validation of B, before the loop) is counted
-    assert first["compile_time"] > 0.7 * first["wall"], first
+    # compiling the user's function (in the validation of B, before the loop) is counted, with
+    # the loops' compilation or loading on top
+    assert first["compile_time"] > 0.8 * first["user"], first
     assert first["compile_time"] <= first["wall_time"] <= first["wall"], first
 
     again, err = _solve_in_new_process(tmp_path, name)  # numba's cache has it now

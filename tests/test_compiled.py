@@ -287,7 +287,7 @@ def test_blocked_ensemble_member_failure_matches_numpy() -> None:
     prob, W0 = _rigid(members=20, scale=1.0)
     W0[13] *= 400.0
     a, b = compiled_and_numpy(prob, IsoMP(), W0, 0.1, 10, 2)
-    assert "blocks" in a.label
+    assert "lanes" in a.label
     assert_same_run(a, b)
     assert list(a.failures.failed) == [13]
 
@@ -412,9 +412,9 @@ def _isolated_threaded_ensembles() -> None:
         assert np.array_equal(serial.rows, threaded.rows), name
     # a long chain cut into chunks over the threads (the threshold lowered for the test): the
     # residual is summed chunk by chunk, so the agreement is to rounding, not bit for bit
-    import isoflow._compiled.runner as cr
+    import isoflow._compiled.spin_chain as sc
 
-    cr.PARALLEL_MIN_SPINS = 1000
+    sc.PARALLEL_MIN_SPINS = 1000
     prob, w0 = _chain(N=3000)
     with thread_limits(blas=1, numba=1):
         serial = run_with(compiled_runner(prob, IsoMP(), w0, 0.1), 10, 2)

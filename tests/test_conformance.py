@@ -39,7 +39,9 @@ class MethodCase:
 
 VECTOR = ("so3-vectors",)
 METHODS: dict[str, MethodCase] = {
-    "IsoMP": MethodCase(iso.IsoMP, True, order_spaces=("so4", "herm3", "sl2-vectors")),
+    "IsoMP": MethodCase(
+        iso.IsoMP, True, order_spaces=("so4", "herm3", "sl2-vectors", "su3-pairs", "se3-vectors")
+    ),
     "IsoMP, X0 = W": MethodCase(lambda: iso.IsoMP(initial_guess="state"), True),
     "IsoMP, Anderson": MethodCase(lambda: iso.IsoMP(solver=iso.FixedPoint(anderson=3)), True),
     "IsoMP, Newton": MethodCase(
@@ -139,7 +141,7 @@ def test_hopeless_step_fails_clearly_and_freezes_only_that_member(name: str, spa
     sol = iso.solve(prob, method, np.stack([good, bad, good]), dt=0.05, n_steps=6, throw=False)
     assert not sol.success and sol.status == 1
     assert list(sol.failed_step) == [-1, 0, -1] and list(sol.failure_reasons) == [(1,)]
-    assert np.array_equal(sol.ys[-1, 1], bad)  # frozen at its last good state
+    assert np.array_equal(sol.ys[-1, 1], prob.algebra.validate(bad))  # frozen at its start
     alone = iso.solve(prob, method, good, dt=0.05, n_steps=6)
     assert float(np.max(np.abs(sol.ys[-1, 0] - alone.ys[-1]))) <= 1e-13
 
@@ -156,3 +158,115 @@ def test_checkpoint_round_trip_is_bit_for_bit(name: str, space: str) -> None:
     rest = run_with(PythonRunner(prob, method, part.y, h, method_state=state, k=5), 12, 12,
                     chunks=(7,))  # fmt: skip
     assert np.array_equal(rest.y, whole.y)
+
+
+# ---- a method written once runs compiled on every layout ---------------------------------------
+
+
+@dataclass(frozen=True)
+class ToyMidpoint(iso.ClassicalMidpoint):
+    """A test-only method: the implicit midpoint rule, whose compiled stage is written here,
+    once, against the layout blocks, and joins the compiled paths by one registration."""
+
+    name = "toy midpoint"  # type: ignore[assignment]
+
+
+def _register_toy_stage() -> None:
+    import numba
+
+    from isoflow._compiled import blocks, stages
+
+    @numba.njit(cache=True)
+    def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[no-untyped-def]
+        blocks.evaluate_B(lay, f, fargs, X, work[0])
+        blocks.bracket(lay, work[0], X, aux)
+        blocks.stage_update1(lay, W, 0.5 * h, aux, G, X, rr)
+
+    @numba.njit(cache=True)
+    def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin):  # type: ignore[no-untyped-def]
+        blocks.advance_state(lay, W, h, aux, Wn, fin)
+
+    needs = frozenset({"evaluate_B", "bracket", "stage_update1", "advance_state"})
+    stages.register(ToyMidpoint, stages.CompiledStage("toy midpoint", iterate, finish, needs, 1))
+
+
+_register_toy_stage()
+
+
+def _toy_cases() -> dict[str, tuple[Callable[[], tuple], str]]:
+    import user_kernels as uk
+
+    def elementwise(n: int) -> tuple:
+        C = np.random.default_rng(n).uniform(-1, 1, (n, n))
+        kernel = iso.ElementwiseLinear(0.5 * (C + C.T))
+        alg = iso.algebras.so(n)
+        W0 = alg.random(1)
+        return iso.IsospectralProblem(B=kernel.evaluate, algebra=alg, kernel=kernel), W0
+
+    def particles(kind: str) -> tuple:
+        alg = iso.algebras.so3_vectors(4) if kind == "so3" else iso.algebras.sl2_vectors(4)
+        axis = np.array([0.6, 0.0, 0.8])
+        prob = iso.IsospectralProblem(
+            B=uk.precession_numpy(axis, 0.7), algebra=alg,
+            kernel=iso.CompiledB(uk.precession, (axis, 0.7)),
+        )  # fmt: skip
+        w0 = np.random.default_rng(4).standard_normal((4, 3))
+        if kind == "sl2":
+            w0[:, 2] = np.sqrt(1.0 + w0[:, 0] ** 2 + w0[:, 1] ** 2)
+        return prob, w0
+
+    def brockett() -> tuple:
+        rng = np.random.default_rng(3)
+        A = rng.standard_normal((5, 5)) + 1j * rng.standard_normal((5, 5))
+        return iso.models.brockett(n=5, N=0.1 * (A + A.conj().T), seed=1)
+
+    def vortices() -> tuple:
+        pos = np.eye(3) + 0.1
+        pos /= np.linalg.norm(pos, axis=1, keepdims=True)
+        return iso.models.sphere_vortices(positions=pos, circulations=np.array([1.0, 0.7, 1.3]))
+
+    def rigid_members() -> tuple:
+        prob, W0 = iso.models.rigid_body(6)
+        return prob, np.stack([W0 * (1 + 0.05 * i) for i in range(10)])
+
+    def mhd(N: int) -> tuple:
+        return iso.models.mhd_sphere(N=N, seed=2, lmax=3)
+
+    return {
+        "dense, written-out products": (lambda: iso.models.rigid_body(6), "written-out"),
+        "dense, SIMD lanes": (rigid_members, "lanes"),
+        "dense, BLAS": (lambda: elementwise(20), "BLAS"),
+        "dense, in a frame": (brockett, "frame"),
+        "(R^3, x)^N": (lambda: particles("so3"), "(R^3, x)^N"),
+        "(R^3, x_L)^N": (lambda: particles("sl2"), "(R^3, x_L)^N"),
+        "vortices on the sphere": (vortices, "sphere"),
+        "vortices on the hyperboloid": (
+            lambda: iso.models.hyperbolic_vortices(config=1),
+            "hyperbolic",
+        ),
+        "spin chain": (
+            lambda: iso.models.heisenberg_chain(N=12, initial="random", seed=3),
+            "spin chain",
+        ),
+        "dual pairs, written-out products": (lambda: mhd(6), "dual pairs"),
+        "dual pairs, BLAS": (lambda: mhd(20), "BLAS"),
+        "heavy top": (lambda: iso.models.heavy_top("kovalevskaya"), "se(3) pairs"),
+    }
+
+
+TOY_CASES = _toy_cases()
+
+
+@pytest.mark.parametrize("layout", list(TOY_CASES))
+def test_a_method_written_once_runs_compiled_on_every_layout(layout: str) -> None:
+    """The toy method's stage, written once in this file, runs compiled on every layout and
+    equals its own NumPy steps (the time loop's two runners, :data:`helpers.FAST_TOL`)."""
+    from helpers import assert_same_run, compiled_and_numpy
+
+    make, label = TOY_CASES[layout]
+    prob, y0 = make()
+    y0 = prob.algebra.project(np.asarray(y0, dtype=prob.algebra.dtype))
+    a, b = compiled_and_numpy(prob, ToyMidpoint(), y0, 0.02, 12, 3)
+    assert label in a.label and "toy midpoint" in a.label
+    assert a.iterations > 12  # a real solve per step
+    assert_same_run(a, b)

@@ -73,8 +73,9 @@ def test_second_order_against_dop853(key: str) -> None:
 
 
 def test_state_stays_in_space_over_1e5_steps() -> None:
-    """Rounding cannot push skew-Hermitian iterates off u(n) (NOTES.md): after 10^5 steps the
-    distance to u(3) is still at rounding level (exactly 0 with the exact projection)."""
+    """Rounding cannot push skew-Hermitian iterates off u(n) (``docs/theory/method.rst``): after
+    10^5 steps the distance to u(3) is still at rounding level (exactly 0 with the exact
+    projection)."""
     alg = iso.algebras.u(3)
     lam = np.array([[1.0, 0.5, 0.3], [0.5, 0.7, 0.2], [0.3, 0.2, 0.4]])  # symmetric weights
 

@@ -1,7 +1,8 @@
 """A ``B`` that leaves the normalizer fails the members whose flow leaves the space (issue 25):
 ``B`` at every saved state is checked (relative ``1e-8``), on the NumPy and the compiled path,
-and such a member is frozen at its last saved state where ``B`` passed, with
-``FAIL_LEFT_SPACE``, instead of a run reported ``completed`` with a Casimir drift of order one.
+and such a member is frozen at its last saved state where ``B`` passed, with the code
+``left the space`` (:mod:`isoflow._failures`), instead of a run reported ``completed`` with a
+Casimir drift of order one.
 (Every method projects its steps onto the space, so the states never show it: ``B`` does.)"""
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The generalized rigid body on so(n) (paper, Section 3.1, with the NOTES.md inertia operator)."""
+"""The generalized rigid body on so(n) (paper, Section 3.1, with the symmetrized inertia operator of
+the corrections to the paper in ``docs/theory/method.rst``)."""
 
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ def test_paper_defaults():
     np.testing.assert_array_equal(prob.parameters["d"], PAPER_D)
     expected_W0 = np.array([[np.sign(j - i) * 0.1 for j in range(10)] for i in range(10)])
     np.testing.assert_array_equal(W0, expected_W0)
-    # I^{-1} W computed entry by entry from the NOTES.md formula
+    # I^{-1} W computed entry by entry from the corrected formula (docs/theory/method.rst)
     W = prob.algebra.random(seed=3)
     IW = np.array([[(PAPER_D[i] + PAPER_D[j]) / 2 * W[i, j] for j in range(10)] for i in range(10)])
     np.testing.assert_allclose(prob.B(W), -IW, rtol=1e-15, atol=0)

@@ -1,8 +1,8 @@
 """One ensemble member whose ``B`` raises fails alone (issue 25): it is frozen at its last good
-state with ``FAIL_B_RAISED`` and the exception's text at the step that raised; the others take
-every step, their states equal to a run without that member bit for bit, on the compiled path
-(a user's ``CompiledB``, serial and parallel drivers) and on the NumPy path (a vectorized
-``B``)."""
+state with the code ``B raised`` (:mod:`isoflow._failures`) and the exception's text at the
+step that raised; the others take every step, their states equal to a run without that member
+bit for bit, on the compiled path (a user's ``CompiledB``, serial and parallel drivers) and on
+the NumPy path (a vectorized ``B``)."""
 
 from __future__ import annotations
 

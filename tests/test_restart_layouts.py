@@ -10,6 +10,7 @@ compares them with the run itself bit for bit. One case is a real SIGKILL of ``i
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 import textwrap
@@ -24,7 +25,6 @@ import pytest
 import isoflow as iso
 from helpers import disk_before_each_write
 from isoflow import io
-from isoflow._compiled.runner import with_kernel
 
 
 def _elementwise(alg: Any, *, skew: bool, frame: bool = False, seed: int = 0) -> Any:
@@ -52,7 +52,7 @@ def _ensemble(y0: Any, alg: Any, members: int) -> Any:
 
 def _euler(N: int, *, kernel: bool = True) -> tuple[Any, Any]:
     problem, y0 = iso.models.euler_sphere(N=N, seed=3)
-    return (problem if kernel else with_kernel(problem, None)), y0
+    return (problem if kernel else dataclasses.replace(problem, kernel=None)), y0
 
 
 def _vortices() -> tuple[Any, Any]:

@@ -109,11 +109,17 @@ def test_non_vectorized_B_runs_per_member() -> None:
     np.testing.assert_allclose(a.ys, b.ys, atol=1e-15)
 
 
-def test_progress_bar_can_be_forced(capsys) -> None:
+def test_progress_bar_can_be_forced_on_and_off(capsys) -> None:
+    """``progress=True`` shows the bar at once on stderr (not a terminal here), ``False`` never;
+    the default shows it only on a terminal."""
     prob = _rigid_body()
     W0 = initial_state(prob.algebra, 6)
-    iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=5, progress=False)
-    assert capsys.readouterr().err == ""
+    iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=5, progress=True)
+    err = capsys.readouterr().err
+    assert "IsoMP" in err and "/5 [" in err and "step" in err, err
+    for progress in (False, None):
+        iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=5, progress=progress)
+        assert capsys.readouterr().err == ""
 
 
 @pytest.mark.parametrize("method", [iso.IsoMP(), iso.ClassicalMidpoint(), iso.RK4()])

@@ -20,21 +20,19 @@ its last good state.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ._errors import NotInSpaceError
+from ._failures import B_RAISED, LEFT_SPACE, MemberFailures
+from ._save_grid import SaveGrid
 from .methods import Method
-from .nonlinear import STATUS_CONVERGED, STATUS_NAMES, STATUS_NON_FINITE
+from .nonlinear import STATUS_CONVERGED, STATUS_NON_FINITE
 from .problems import IsospectralProblem
 
 __all__ = [
-    "FAILURE_NAMES",
-    "FAIL_B_RAISED",
-    "FAIL_LEFT_SPACE",
     "LEFT_SPACE_ATOL",
     "LEFT_SPACE_RTOL",
     "MemberFailures",
@@ -47,77 +45,11 @@ __all__ = [
 
 Array = NDArray[Any]
 
-#: Failure code of a member whose ``B`` raised an exception (beside the solver's codes).
-FAIL_B_RAISED = 4
-#: Failure code of a member whose flow leaves the space: ``B`` at a saved state is farther from
-#: the normalizer than :data:`LEFT_SPACE_ATOL` ``+`` :data:`LEFT_SPACE_RTOL` ``* norm``.
-FAIL_LEFT_SPACE = 5
-#: Names of the failure codes of a member (the nonlinear solver's and the above).
-FAILURE_NAMES = {**STATUS_NAMES, FAIL_B_RAISED: "B raised", FAIL_LEFT_SPACE: "left the space"}
 #: Relative distance of ``B`` from the normalizer at a saved state beyond which its member fails
 #: (far above rounding, the tolerance of the check of ``B`` when a run starts).
 LEFT_SPACE_RTOL = 1e-8
 #: Absolute part of that tolerance.
 LEFT_SPACE_ATOL = 1e-12
-
-
-@dataclass
-class MemberFailures:
-    """Which ensemble members failed, when and why (flattened member index).
-
-    Attributes
-    ----------
-    step : ndarray of int, shape (M,)
-        Index of the step that failed (``0``: the step from ``t0``; the member's last good
-        state is after ``step`` steps); ``-1`` while alive.
-    status : ndarray of int
-        Failure code (``FAILURE_NAMES``); 0 while alive.
-    iterations : ndarray of int
-        Iterations spent on the failed step.
-    residual : ndarray of float
-        Final residual of the failed solve.
-    messages : dict of int to str
-        A message per member where there is more to say (the exception ``B`` raised).
-    """
-
-    step: NDArray[np.int64]
-    status: NDArray[np.int64]
-    iterations: NDArray[np.int64]
-    residual: NDArray[np.float64]
-    messages: dict[int, str] = field(default_factory=dict)
-
-    @classmethod
-    def none(cls, members: int) -> MemberFailures:
-        """A record of ``members`` members, all alive."""
-        return cls(
-            step=np.full(members, -1, dtype=np.int64),
-            status=np.zeros(members, dtype=np.int64),
-            iterations=np.zeros(members, dtype=np.int64),
-            residual=np.zeros(members),
-        )
-
-    @property
-    def alive(self) -> NDArray[np.bool_]:
-        """Per member: not failed."""
-        return self.step < 0
-
-    @property
-    def failed(self) -> NDArray[np.int64]:
-        """Flat indices of the failed members."""
-        return np.flatnonzero(self.step >= 0)
-
-    def record(self, m: int, step: int, status: int, iterations: int, residual: float) -> None:
-        """Mark member ``m`` failed at ``step``."""
-        self.step[m] = step
-        self.status[m] = status
-        self.iterations[m] = iterations
-        self.residual[m] = residual
-
-    def reason(self, m: int) -> str:
-        """The failure of member ``m`` in words."""
-        name = FAILURE_NAMES.get(int(self.status[m]), str(int(self.status[m])))
-        extra = self.messages.get(int(m))
-        return f"{name}: {extra}" if extra else name
 
 
 class Runner:
@@ -130,9 +62,9 @@ class Runner:
         every member has failed, the run ends where the last one failed.
     exceptions : dict of int to BaseException
         Per failed member (flattened index), the exception that failed it where there is one:
-        what its ``B`` raised (:data:`FAIL_B_RAISED`), or the
-        :class:`~isoflow.NotInSpaceError` of a ``B`` that left the normalizer
-        (:data:`FAIL_LEFT_SPACE`).
+        what its ``B`` raised (the failure code ``B raised``), or the
+        :class:`~isoflow.NotInSpaceError` of a ``B`` that left the normalizer (``left the
+        space``; :mod:`isoflow._failures`).
     failures : MemberFailures
     iterations_total, iterations_max : int
         Nonlinear iterations summed over steps and members; the largest for one step.
@@ -142,11 +74,19 @@ class Runner:
         Evaluations of ``B`` summed over members (Newton's Jacobians, RK stages included).
     label : str
         What runs the steps, for messages (``"NumPy"``, ``"compiled (dense BLAS)"``, ...).
+    parallel : bool
+        Whether its steps run over threads of its own (the time loop then keeps the writer's
+        work in the loop's thread).
+    checkpoints_at_saves : bool
+        Whether a checkpoint of it must fall on a save point (the time loop then ends its
+        chunks there).
     """
 
     k: int
     failures: MemberFailures
     label: str = "runner"
+    parallel: bool = False
+    checkpoints_at_saves: bool = False
 
     def __init__(self) -> None:
         self.exceptions: dict[int, BaseException] = {}
@@ -155,9 +95,10 @@ class Runner:
         self.residual_max = 0.0
         self.b_evaluations = 0
 
-    def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
-        """Take ``nsteps`` steps; the state after every step ``k`` with ``k % save_every == 0``
-        or ``k == k_final`` goes into the next row of ``out`` (``(R, M, *core)``)."""
+    def advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
+        """Take ``nsteps`` steps; the state after every save point ``k`` of ``grid``
+        (:meth:`SaveGrid.is_save <isoflow._save_grid.SaveGrid.is_save>`) goes into the next
+        row of ``out`` (``(R, M, *core)``)."""
         raise NotImplementedError  # pragma: no cover
 
     def state(self) -> tuple[Array, Any]:
@@ -287,9 +228,9 @@ class PythonRunner(Runner):
         except Exception as exc:  # B (or the user's code under it) raised
             return None, exc
 
-    def advance(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+    def advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         if self.single:
-            self._advance_single(nsteps, save_every, k_final, out)
+            self._advance_single(nsteps, grid, out)
             return
         row = 0
         fails = self.failures
@@ -299,11 +240,11 @@ class PythonRunner(Runner):
             if not fails.alive.any():
                 return  # every member frozen: the run ends after k - 1 steps
             self.k = k
-            if k % save_every == 0 or k == k_final:
+            if grid.is_save(k):
                 out[row] = self.Y
                 row += 1
 
-    def _advance_single(self, nsteps: int, save_every: int, k_final: int, out: Array) -> None:
+    def _advance_single(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         """:meth:`advance` for one system (no member bookkeeping on the way)."""
         if not self.failures.alive[0]:
             return
@@ -315,7 +256,7 @@ class PythonRunner(Runner):
             try:
                 res = method.step(problem, y, h, st)
             except Exception as exc:  # B (or the user's code under it) raised
-                self.failures.record(0, k, FAIL_B_RAISED, 0, float("nan"))
+                self.failures.record(0, k, B_RAISED, 0, float("nan"))
                 self.failures.messages[0] = f"{type(exc).__name__}: {exc}"
                 self.exceptions[0] = exc
                 break
@@ -333,7 +274,7 @@ class PythonRunner(Runner):
                 self.residual_max = max(self.residual_max, float(res.residual))
             y, st = res.y, res.state
             self.k = k + 1
-            if self.k % save_every == 0 or self.k == k_final:
+            if grid.is_save(self.k):
                 out[row, 0] = y
                 row += 1
         self.Y[0] = y
@@ -342,7 +283,7 @@ class PythonRunner(Runner):
     def _isolate(self, k: int, alive: NDArray[np.intp], exc: BaseException) -> None:
         """Step ``k`` of the members ``alive`` raised ``exc``: find the members whose step
         raises on its own (each stepped alone, the results dropped), fail them with
-        :data:`FAIL_B_RAISED`, and step the others together as if those were not there. If
+        :data:`B_RAISED`, and step the others together as if those were not there. If
         no member raises alone, the step of them all raised: every one of them fails."""
         raised: dict[int, BaseException] = {}
         if alive.size > 1:
@@ -354,7 +295,7 @@ class PythonRunner(Runner):
         if not raised:
             raised = {int(m): exc for m in alive}
         for m, e in raised.items():
-            self.failures.record(m, k, FAIL_B_RAISED, 0, float("nan"))
+            self.failures.record(m, k, B_RAISED, 0, float("nan"))
             self.failures.messages[m] = f"{type(e).__name__}: {e}"
             self.exceptions[m] = e
         rest = np.setdiff1d(alive, np.fromiter(raised, dtype=np.int64))
@@ -362,11 +303,10 @@ class PythonRunner(Runner):
             self._one_step(k, rest)
 
     def _one_step(self, k: int, alive: NDArray[np.intp]) -> None:
-        """Step ``k`` (from ``t0 + k h``) of the members ``alive``."""
+        """Step ``k`` (from ``t0 + k h``) of the ensemble members ``alive`` (one system steps
+        in :meth:`_advance_single`)."""
         everyone = alive.size == self.M
-        if self.single:
-            y, st = self.Y[0], self.mstate
-        elif everyone:
+        if everyone:
             y, st = self.Y, self.mstate
         else:
             y, st = self.Y[alive], take_members(self.mstate, alive, self.M)
@@ -394,20 +334,13 @@ class PythonRunner(Runner):
         for j in np.flatnonzero(~ok):
             self.failures.record(int(alive[j]), k, int(status[j]), int(iters[j]), float(resid[j]))
         if ok.all():
-            if self.single:
-                self.Y[0] = ynew[0]
-            elif everyone:
+            if everyone:
                 self.Y = ynew.copy() if ynew.base is not None else ynew
+                self.mstate = res.state
             else:
                 self.Y[alive] = ynew
-            self.mstate = (
-                res.state
-                if self.single or everyone
-                else merge_members(self.mstate, alive, res.state, self.M)
-            )
+                self.mstate = merge_members(self.mstate, alive, res.state, self.M)
             return
-        if self.single:
-            return  # the one member failed: frozen
         good = alive[ok]
         self.Y[good] = ynew[ok]
         sub = take_members(res.state, np.flatnonzero(ok), n)
@@ -430,7 +363,7 @@ def _b_off_the_normalizer(
     try:
         with np.errstate(all="ignore"):
             B = np.asarray(runner.B_at(rows[:, members]), dtype=N.dtype)
-    except Exception:  # the steps report a B that raises (FAIL_B_RAISED)
+    except Exception:  # the steps report a B that raises (B_RAISED)
         return off, dist, tol
     dist[:, members] = N.distance(B)
     tol[:, members] = LEFT_SPACE_ATOL + LEFT_SPACE_RTOL * N.norm(B)
@@ -447,7 +380,7 @@ def stop_members_leaving_the_space(
 
     (Every method ends its steps in the space, by a projection: such a ``B`` shows in the
     lost invariants, not in the states, so ``B`` is what is checked.) Such a member is
-    frozen with :data:`FAIL_LEFT_SPACE` at its last saved state where ``B`` passed: the
+    frozen with :data:`LEFT_SPACE` at its last saved state where ``B`` passed: the
     previous row, or ``last_good`` (``(step, states)`` from before the chunk); its rows from
     the first bad one on repeat that state. If no member is left, the run ends there.
     Returns the new ``last_good``: the chunk's last row (after the freezes).
@@ -464,7 +397,7 @@ def stop_members_leaving_the_space(
             f"normalizer {alg.normalizer.name} (beyond {tol[j, m]:.1e}), so the flow "
             f"W' = [B(W), W] leaves {alg.name}"
         )
-        runner.freeze(int(m), step, good, FAIL_LEFT_SPACE, message)
+        runner.freeze(int(m), step, good, LEFT_SPACE, message)
         runner.exceptions[int(m)] = NotInSpaceError(
             message, distance=float(dist[j, m]), tolerance=float(tol[j, m])
         )

@@ -50,6 +50,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from . import _failures
 from ._errors import ParameterError
 from .algebras import Algebra
 
@@ -68,16 +69,11 @@ __all__ = [
 
 Array = NDArray[Any]
 
-STATUS_CONVERGED = 0
-STATUS_MAX_ITER = 1
-STATUS_DIVERGED = 2
-STATUS_NON_FINITE = 3
-STATUS_NAMES = {
-    STATUS_CONVERGED: "converged",
-    STATUS_MAX_ITER: "max_iter",
-    STATUS_DIVERGED: "diverged",
-    STATUS_NON_FINITE: "non_finite",
-}
+#: The solvers' status codes (:mod:`isoflow._failures` holds the whole vocabulary).
+STATUS_CONVERGED = _failures.CONVERGED
+STATUS_MAX_ITER = _failures.MAX_ITER
+STATUS_DIVERGED = _failures.DIVERGED
+STATUS_NON_FINITE = _failures.NON_FINITE
 
 #: Returned by :func:`stopping_step` while the iteration goes on (not a status of a result).
 CONTINUE = -1
@@ -96,7 +92,7 @@ def stopping_step(
     ``floor = stall_rtol s``. Returns ``(code, prev, first)``: a ``STATUS_*`` code
     (:data:`CONTINUE` to go on) and the ``prev`` and ``first`` to pass at the next
     iteration. This one function is the rule everywhere: the Python solvers call it, the
-    compiled kernels of :mod:`isoflow._fast` use a numba compilation of it.
+    compiled driver (:mod:`isoflow._compiled.driver`) uses a numba compilation of it.
     """
     if not math.isfinite(r):
         code = STATUS_NON_FINITE
@@ -209,17 +205,11 @@ class NonlinearSolver:
 
     #: Anderson memory (0: none); :class:`FixedPoint` sets it.
     anderson: int = 0
-    #: Evaluations of ``G`` per iteration and member beyond the first (Newton's Jacobian).
-    extra_evaluations_per_iteration: int = 0
 
     def _update(
         self, prob: FixedPointProblem, X: Array, GX: Array, mask: Array | None
     ) -> Array:  # pragma: no cover - abstract
         raise NotImplementedError
-
-    def evaluations_per_iteration(self, prob: FixedPointProblem) -> int:
-        """Evaluations of ``G`` (hence of ``B``) per iteration and member."""
-        return 1
 
     def solve(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
         """Solve ``X = G(X)`` starting from ``X0`` (not modified).

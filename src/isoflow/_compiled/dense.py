@@ -1,64 +1,94 @@
-r"""Compiled IsoMP stages on dense matrices: so(n), u(n), su(n), Sym(n), Herm(n).
+r"""The dense layouts: so(n), u(n), su(n), Sym(n), Herm(n) as ``n x n`` matrices.
 
 These spaces are ``V = {Y : sigma(Y) = Y}`` with :math:`\sigma(Y) = s\,\bar Y^T` (``s = -1`` for
 the skew spaces, ``+1`` for the symmetric ones; ``su(n)`` adds ``Tr = 0``), and ``B`` takes
-values in the skew normalizer. One fixed-point iteration of IsoMP is, with ``B = f(X)``,
+values in the skew normalizer, so with ``P = B X``
 
 .. math::
 
-    P = B X, \qquad [B, X] = P + \sigma(P), \qquad B X B = P B, \qquad
-    G(X) = \Pi\big(W + \tfrac h2 (P + \sigma(P)) + \tfrac{h^2}{4} P B\big),
+    [B, X] = P + \sigma(P), \qquad B X B = P B ,
 
-one evaluation of ``B`` and two matrix products (:meth:`isoflow.IsoMP.stage_problem`), and the
-new state is :math:`W_{k+1} = \Pi_V(W + h\,(P + \sigma(P)))` with ``P`` of the accepted ``X``.
-``Pi`` is the projection :math:`(Y + \sigma(Y))/2` onto the stage space (``u(n)`` for
-``su(n)``: the stage has a trace) and ``Pi_V`` the one onto ``V`` (for ``su(n)`` it also
-removes the trace).
+two matrix products per evaluation. The stage space is ``u(n)`` for ``su(n)`` (a stage has a
+trace); ``Pi`` below is the projection :math:`(Y + \sigma(Y))/2` onto it and ``Pi_V`` the one onto
+``V`` (for ``su(n)`` it also removes the trace).
 
-Two implementations of the same map, with the interface of :mod:`isoflow._compiled.driver`
-(``iterate(f, fargs, sp, W, X, G, aux, work, half, quarter) -> |G - X|^2`` and
-``finish(f, fargs, sp, W, X, aux, work, h, Wn) -> finite``):
+Two layout records, one per way of forming the products:
 
-* **small** ``n`` (:func:`iterate_small`): written-out products, no library calls;
-* **larger** ``n`` (:func:`iterate_blas`): BLAS products (numba's ``np.dot``) into the
-  member's buffers. :math:`T = BXB` lies in ``V`` (``B`` is skew), so only its lower block
-  triangle is computed, block row by block row, as
-  :math:`T_{[r_0, r_1), [0, r_1)} = -P_{[r_0,r_1)}\, \overline{B}_{[0, r_1)}^{\,T}` (about
-  half of a full product for several blocks, :func:`lower_blocks`); the rest (bracket,
-  iterate, residual, mirrored into ``V``) is one cache-blocked pass over pairs of mirrored
-  tiles. Every iterate and state stays in ``V`` to the last bit.
+* :class:`DenseSmall` (``n <= SMALL_N``): written-out loops, no library calls;
+* :class:`DenseBlas` (larger ``n``): BLAS products (numba's ``np.dot``); IsoMP on it runs a fused
+  specialization with a triangular product and tile passes (:mod:`isoflow._compiled.dense_tiles`).
 
-``sp`` (the stage parameters) is ``(n, s, traceless)`` for the small stage and
-``(n, s, traceless, rowoff, blocks)`` for the BLAS one: ``blocks`` the ``(nb, 2)`` row ranges
-of the triangular product and ``rowoff[i]`` the offset of row ``i`` of the packed
-lower-block-triangular ``T`` in the scratch row ``work[1]`` (:func:`packed_row_offsets`).
+The blocks (:mod:`isoflow._compiled.blocks`) are written on pairs of mirrored entries, so every
+iterate and state lies in ``V`` to the last bit (an entry and its mirror go through the same
+operations).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
+from numpy.typing import NDArray
+
+from ..algebras import Hermitian, SpecialOrthogonal, Symmetric, Unitary
+from ..kernels import ElementwiseLinear
+from . import blocks
+from .layout import Layout, member_layout
 
 __all__ = [
     "SMALL_N",
-    "finish",
-    "finish_blas",
-    "iterate_blas",
-    "iterate_small",
+    "DenseBlas",
+    "DenseSmall",
+    "dense_layout",
     "lower_blocks",
+    "mirror_sum",
     "packed_row_offsets",
+    "product",
+    "remove_trace",
+    "sigma_sign",
 ]
 
 #: Largest ``n`` for which the written-out products beat BLAS calls (measured, benchmark 10).
 SMALL_N = 16
-#: Tile edge of the mirrored passes.
-_TILE = 32
-#: Target row-block height of the triangular product (a multiple of ``_TILE``).
-_BLOCK = 128
 #: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
 _FM = {"reassoc", "nsz", "contract"}
+#: Tile edge of the mirrored passes of the BLAS layout's IsoMP (:mod:`.dense_tiles`).
+_TILE = 32
+#: Target row-block height of its triangular product (a multiple of ``_TILE``).
+_BLOCK = 128
+
+
+class DenseSmall(NamedTuple):
+    """A dense ``n x n`` state, products written out. ``s``: the sign of sigma; ``traceless``:
+    ``su(n)``."""
+
+    n: int
+    s: float
+    traceless: bool
+
+
+class DenseBlas(NamedTuple):
+    """A dense ``n x n`` state, products through BLAS. ``rowoff`` and ``blocks`` describe the
+    packed triangular product of the fused IsoMP stage (:mod:`.dense_tiles`)."""
+
+    n: int
+    s: float
+    traceless: bool
+    rowoff: NDArray[np.int64]
+    blocks: NDArray[np.int64]
+
+
+def sigma_sign(alg: Any) -> float | None:
+    r"""``s`` with :math:`\sigma(Y) = s\,\bar Y^T` for the dense spaces with a compiled path
+    (``su(n)`` is ``u(n)`` plus the trace removal of its projection), else ``None``."""
+    if isinstance(alg, (SpecialOrthogonal, Unitary)):
+        return -1.0
+    if isinstance(alg, (Symmetric, Hermitian)):
+        return 1.0
+    return None
 
 
 def lower_blocks(n: int, block: int = _BLOCK) -> list[tuple[int, int]]:
@@ -88,58 +118,133 @@ def packed_row_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(blocks, dtype=np.int64), rowoff
 
 
-# ---- small n: written-out products ------------------------------------------------------------
+# ---- blocks -----------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def iterate_small(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """One iteration for small ``n``; ``aux`` receives ``[B, X] = P + sigma(P)``."""
-    n = sp[0]
-    s = sp[1]
-    Xm = X.reshape((n, n))
+@numba.njit(cache=True, inline="always")
+def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
+    n = lay.n
+    f(X.reshape((n, n)), B.reshape((n, n)), *fargs)
+
+
+@numba.njit(cache=True, inline="always")
+def mirror_sum(lay, C):  # type: ignore[no-untyped-def]
+    """``C = P + sigma(P)`` in place (``C`` holds ``P``), pair by pair (``lay``: any record
+    with ``n`` and the sign ``s`` of sigma; also the pair layouts' brackets)."""
+    n = lay.n
+    s = lay.s
+    Cm = C.reshape((n, n))
+    for i in range(n):
+        p = Cm[i, i]
+        Cm[i, i] = p + s * p.conjugate()
+        for j in range(i + 1, n):
+            pij = Cm[i, j]
+            pji = Cm[j, i]
+            Cm[i, j] = pij + s * pji.conjugate()
+            Cm[j, i] = pji + s * pij.conjugate()
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def product(n, A, B, out):  # type: ignore[no-untyped-def]
+    """``out = A B`` (written out, ``n x n`` views; also the pair layouts' small products)."""
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = 0.0
+        for k in range(n):
+            a = A[i, k]
+            for j in range(n):
+                out[i, j] += a * B[k, j]
+
+
+@numba.njit(cache=True, inline="always")
+def _bracket_triple_small(lay, B, X, C, T):  # type: ignore[no-untyped-def]
+    n = lay.n
+    Bm = B.reshape((n, n))
+    Cm = C.reshape((n, n))
+    product(n, Bm, X.reshape((n, n)), Cm)
+    product(n, Cm, Bm, T.reshape((n, n)))
+    mirror_sum(lay, C)
+
+
+@numba.njit(cache=True, inline="always")
+def _bracket_small(lay, B, X, C):  # type: ignore[no-untyped-def]
+    n = lay.n
+    product(n, B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
+    mirror_sum(lay, C)
+
+
+@numba.njit(cache=True, inline="always")
+def _bracket_triple_blas(lay, B, X, C, T):  # type: ignore[no-untyped-def]
+    n = lay.n
+    Bm = B.reshape((n, n))
+    Cm = C.reshape((n, n))
+    np.dot(Bm, X.reshape((n, n)), Cm)
+    np.dot(Cm, Bm, T.reshape((n, n)))
+    mirror_sum(lay, C)
+
+
+@numba.njit(cache=True, inline="always")
+def _bracket_blas(lay, B, X, C):  # type: ignore[no-untyped-def]
+    n = lay.n
+    np.dot(B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
+    mirror_sum(lay, C)
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _stage_update(lay, W, a, C, b, T, G, X, rr):  # type: ignore[no-untyped-def]
+    """``G = Pi(W + a C + b T)`` pair by pair; ``rr[0] = |G - X|^2``."""
+    n = lay.n
+    s = lay.s
     Wm = W.reshape((n, n))
+    Cm = C.reshape((n, n))
+    Tm = T.reshape((n, n))
     Gm = G.reshape((n, n))
-    C = aux.reshape((n, n))
-    Bm = work[0].reshape((n, n))
-    P = work[1].reshape((n, n))
-    T = work[2].reshape((n, n))
-    f(Xm, Bm, *fargs)
-    for i in range(n):
-        for j in range(n):
-            P[i, j] = 0.0
-        for k in range(n):
-            b = Bm[i, k]
-            for j in range(n):
-                P[i, j] += b * Xm[k, j]
-    for i in range(n):
-        for j in range(n):
-            T[i, j] = 0.0
-        for k in range(n):
-            p = P[i, k]
-            for j in range(n):
-                T[i, j] += p * Bm[k, j]
-    for i in range(n):
-        for j in range(n):
-            C[i, j] = P[i, j] + s * P[j, i].conjugate()
-    rr = 0.0
+    Xm = X.reshape((n, n))
+    acc = 0.0
     for i in range(n):
         for j in range(i, n):
-            gij = Wm[i, j] + half * C[i, j] + quarter * T[i, j]
-            gji = Wm[j, i] + half * C[j, i] + quarter * T[j, i]
-            a = 0.5 * (gij + s * gji.conjugate())
-            b2 = 0.5 * (gji + s * gij.conjugate())
-            Gm[i, j] = a
-            Gm[j, i] = b2
-            d = a - Xm[i, j]
-            rr += d.real * d.real + d.imag * d.imag
+            gij = Wm[i, j] + a * Cm[i, j] + b * Tm[i, j]
+            gji = Wm[j, i] + a * Cm[j, i] + b * Tm[j, i]
+            u = 0.5 * (gij + s * gji.conjugate())
+            v = 0.5 * (gji + s * gij.conjugate())
+            Gm[i, j] = u
+            Gm[j, i] = v
+            d = u - Xm[i, j]
+            acc += d.real * d.real + d.imag * d.imag
             if j != i:
-                d = b2 - Xm[j, i]
-                rr += d.real * d.real + d.imag * d.imag
-    return rr
+                d = v - Xm[j, i]
+                acc += d.real * d.real + d.imag * d.imag
+    rr[0] = acc
 
 
-@numba.njit(cache=True)
-def _remove_trace(A, n):  # type: ignore[no-untyped-def]
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _stage_update1(lay, W, a, C, G, X, rr):  # type: ignore[no-untyped-def]
+    """``G = Pi(W + a C)`` pair by pair; ``rr[0] = |G - X|^2``."""
+    n = lay.n
+    s = lay.s
+    Wm = W.reshape((n, n))
+    Cm = C.reshape((n, n))
+    Gm = G.reshape((n, n))
+    Xm = X.reshape((n, n))
+    acc = 0.0
+    for i in range(n):
+        for j in range(i, n):
+            gij = Wm[i, j] + a * Cm[i, j]
+            gji = Wm[j, i] + a * Cm[j, i]
+            u = 0.5 * (gij + s * gji.conjugate())
+            v = 0.5 * (gji + s * gij.conjugate())
+            Gm[i, j] = u
+            Gm[j, i] = v
+            d = u - Xm[i, j]
+            acc += d.real * d.real + d.imag * d.imag
+            if j != i:
+                d = v - Xm[j, i]
+                acc += d.real * d.real + d.imag * d.imag
+    rr[0] = acc
+
+
+@numba.njit(cache=True, inline="always")
+def remove_trace(A, n):  # type: ignore[no-untyped-def]
     """``A -= (Tr A / n) I`` for the flat ``n x n`` matrix ``A``."""
     tr = A[0]
     for i in range(1, n):
@@ -149,165 +254,94 @@ def _remove_trace(A, n):  # type: ignore[no-untyped-def]
         A[i * (n + 1)] -= tr
 
 
-@numba.njit(cache=True)
-def finish(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
-    """``Wn = Pi_V(W + h C)`` with ``C = [B, X]`` in ``aux`` (the small stage); returns whether
-    ``Wn`` is finite. ``W`` and ``C`` are exact mirrors, hence so is ``Wn``."""
+@numba.njit(cache=True, inline="always")
+def _advance_state(lay, W, h, C, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = Pi_V(W + h C)``: ``W`` and ``C`` are exact mirrors, hence so is ``W + h C``; only
+    the trace of ``su(n)`` is left to remove."""
     acc = 0.0
     for i in range(W.shape[0]):
-        v = W[i] + h * aux[i]
+        v = W[i] + h * C[i]
         Wn[i] = v
         acc += abs(v.real) + abs(v.imag)
-    if sp[2]:
-        _remove_trace(Wn, sp[0])
-    return math.isfinite(acc)
+    if lay.traceless:
+        remove_trace(Wn, lay.n)
+    fin[0] = math.isfinite(acc)
 
 
-# ---- larger n: BLAS products and mirrored tile passes -------------------------------------------
+for _cls in (DenseSmall, DenseBlas):
+    blocks.provide(blocks.evaluate_B, _cls)(_evaluate_B)
+    blocks.provide(blocks.stage_update, _cls)(_stage_update)
+    blocks.provide(blocks.stage_update1, _cls)(_stage_update1)
+    blocks.provide(blocks.advance_state, _cls)(_advance_state)
+blocks.provide(blocks.bracket_triple, DenseSmall)(_bracket_triple_small)
+blocks.provide(blocks.bracket, DenseSmall)(_bracket_small)
+blocks.provide(blocks.bracket_triple, DenseBlas)(_bracket_triple_blas)
+blocks.provide(blocks.bracket, DenseBlas)(_bracket_blas)
+blocks.provide_member_defaults(DenseSmall, DenseBlas)
 
 
-@numba.njit(cache=True, inline="always")
-def _load_t(A, bi, ie, bj, je, buf):  # type: ignore[no-untyped-def]
-    """``buf[ii, jj] = A[bj + jj, bi + ii]``: the transposed tile, read row by row from ``A``."""
-    for j in range(bj, je):
-        for i in range(bi, ie):
-            buf[i - bi, j - bj] = A[j, i]
+# ---- the layout of a run ----------------------------------------------------------------------
 
 
-@numba.njit(cache=True, inline="always")
-def _store_t(buf, A, bi, ie, bj):  # type: ignore[no-untyped-def]
-    """``A[bj + jj, bi + ii] = buf[ii, jj]``: the transposed tile written back row by row."""
-    for jj in range(_TILE):
-        dst = A[bj + jj, bi:ie]
-        for ii in range(ie - bi):
-            dst[ii] = buf[ii, jj]
+def _load_scipy_blas() -> None:
+    """Load the BLAS the BLAS layout calls (numba's ``np.dot`` binds SciPy's cython BLAS, a
+    library of its own besides NumPy's) before the run starts, so that the run's thread limits
+    reach it from the first step (:mod:`isoflow.threads`)."""
+    import scipy.linalg.cython_blas  # noqa: F401
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyped-def]
-    """``G = W + half (P + sigma(P)) - quarter T'`` on the lower triangle, mirrored into ``V``
-    (``T' = -T`` packed by rows, see :func:`iterate_blas`); returns ``|G - X|^2``.
+def record(alg: Any) -> DenseSmall | DenseBlas:
+    """The layout record of the dense space ``alg`` (written-out products up to
+    :data:`SMALL_N`)."""
+    s = sigma_sign(alg)
+    assert s is not None
+    n = alg.shape[0]
+    traceless = bool(getattr(alg, "traceless", False))
+    if n <= SMALL_N:
+        return DenseSmall(n, s, traceless)
+    _load_scipy_blas()
+    blocks_, rowoff = packed_row_offsets(n)
+    return DenseBlas(n, s, traceless, rowoff, blocks_)
 
-    Works on pairs of mirrored tiles ``(bi, bj)``, ``bj < bi``: the upper tile of ``P`` is read
-    row by row into a small transposed buffer, the mirrored tile of ``G`` is written back row
-    by row from a buffer; the inner loops run over contiguous row pieces (they vectorize).
-    Diagonal tiles are their own mirrors; on the diagonal ``T`` is projected onto ``V``.
+
+def dense_layout(problem: Any, members: int) -> Layout | None:
+    """The dense layout of the run, or ``None`` for another space.
+
+    An :class:`~isoflow.ElementwiseLinear` kernel with a frame runs in the frame where ``B`` is
+    entrywise (IsoMP commutes with the change of frame); the state and the offsets are then
+    mapped back at every save point so that a restart continues the run bit for bit.
     """
-    n = W.shape[0]
-    PT = np.empty((_TILE, _TILE), dtype=P.dtype)
-    GT = np.empty((_TILE, _TILE), dtype=G.dtype)
-    rr = 0.0
-    for bi in range(0, n, _TILE):
-        ie = min(bi + _TILE, n)
-        for bj in range(0, bi, _TILE):
-            je = bj + _TILE
-            _load_t(P, bi, ie, bj, je, PT)
-            for ii in range(ie - bi):
-                i = bi + ii
-                p_row = P[i, bj:je]
-                w_row = W[i, bj:je]
-                t_row = Tp[rowoff[i] + bj : rowoff[i] + je]
-                x_row = X[i, bj:je]
-                g_row = G[i, bj:je]
-                pt_row = PT[ii]
-                gt_row = GT[ii]
-                for jj in range(_TILE):
-                    c = p_row[jj] + s * pt_row[jj].conjugate()
-                    g = w_row[jj] + half * c - quarter * t_row[jj]
-                    g_row[jj] = g
-                    gt_row[jj] = s * g.conjugate()
-                    d = g - x_row[jj]
-                    rr += 2.0 * (d.real * d.real + d.imag * d.imag)
-            _store_t(GT, G, bi, ie, bj)
-        for i in range(bi, ie):  # the diagonal tile
-            o = rowoff[i]
-            for j in range(bi, i):
-                c = P[i, j] + s * P[j, i].conjugate()
-                g = W[i, j] + half * c - quarter * Tp[o + j]
-                G[i, j] = g
-                G[j, i] = s * g.conjugate()
-                d = g - X[i, j]
-                rr += 2.0 * (d.real * d.real + d.imag * d.imag)
-            p = P[i, i]
-            t = -Tp[o + i]
-            g = W[i, i] + half * (p + s * p.conjugate()) + quarter * (0.5 * (t + s * t.conjugate()))
-            G[i, i] = g
-            d = g - X[i, i]
-            rr += d.real * d.real + d.imag * d.imag
-    return rr
+    alg = problem.algebra
+    if sigma_sign(alg) is None:
+        return None
+    kernel = problem.kernel
+    rec = record(alg)
+    kind = "written-out products" if isinstance(rec, DenseSmall) else "BLAS"
+    name = f"dense {alg.name} ({kind})"
+    if isinstance(kernel, ElementwiseLinear) and kernel.frame is not None:
+        return _frame_layout(name, rec, alg, kernel)
+    return member_layout(name, rec, alg.shape, alg.dtype)
 
 
-@numba.njit(cache=True)
-def iterate_blas(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """One iteration for larger ``n``; ``aux`` receives ``P = B X`` (the bracket is formed
-    from it when needed)."""
-    n = sp[0]
-    s = sp[1]
-    rowoff = sp[3]
-    Xm = X.reshape((n, n))
-    Bm = work[0].reshape((n, n))
-    P = aux.reshape((n, n))
-    f(Xm, Bm, *fargs)
-    np.dot(Bm, Xm, P)
-    # B[:, :r1] = -conj(B[:r1, :]).T (B is skew), so block row (r0, r1) of T = P B is
-    # -P[r0:r1] @ conj(B[:r1]).T: both operands contiguous, the transpose is BLAS's flag
-    if np.iscomplexobj(Bm):
-        Bc = work[2].reshape((n, n))
-        for i in range(n):
-            for j in range(n):
-                Bc[i, j] = Bm[i, j].conjugate()
-    else:
-        Bc = Bm
-    Tp = work[1]
-    blocks = sp[4]
-    for b in range(blocks.shape[0]):
-        r0 = blocks[b, 0]
-        r1 = blocks[b, 1]
-        o = rowoff[r0]
-        np.dot(P[r0:r1], Bc[:r1].T, Tp[o : o + (r1 - r0) * r1].reshape((r1 - r0, r1)))
-    return _combine(W.reshape((n, n)), Xm, P, Tp, rowoff, G.reshape((n, n)), s, half, quarter)
+def _frame_layout(name: str, rec: Any, alg: Any, kernel: ElementwiseLinear) -> Layout:
+    n = alg.shape[0]
+    assert kernel.frame is not None
+    U = kernel.frame.astype(alg.dtype) if alg.is_complex else kernel.frame
+    Uh = np.ascontiguousarray(U.conj().T)
+    stage = alg.stage_algebra
 
+    def to_units(Y: NDArray[Any]) -> NDArray[Any]:
+        return np.ascontiguousarray(Uh @ Y @ U, dtype=alg.dtype).reshape(Y.shape[0], -1)
 
-@numba.njit(cache=True, fastmath=_FM)
-def finish_blas(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
-    """``Wn = Pi_V(W + h (P + sigma(P)))`` with ``P = B X`` in ``aux``, computed on the lower
-    triangle and mirrored tile by tile; returns whether ``Wn`` is finite.
+    def back(space: Any) -> Callable[[NDArray[Any]], NDArray[Any]]:
+        def f(A: NDArray[Any]) -> NDArray[Any]:
+            M = A.reshape(*A.shape[:-1], n, n)
+            return np.asarray(space.project(U @ M @ Uh))
 
-    The tile traversal is :func:`_combine`'s on purpose, with another body: passing the body
-    as a function argument would cost the inlining that lets the row loops vectorize.
-    """
-    n = sp[0]
-    s = sp[1]
-    Wm = W.reshape((n, n))
-    P = aux.reshape((n, n))
-    Wo = Wn.reshape((n, n))
-    PT = np.empty((_TILE, _TILE), dtype=P.dtype)
-    VT = np.empty((_TILE, _TILE), dtype=P.dtype)
-    acc = 0.0
-    for bi in range(0, n, _TILE):
-        ie = min(bi + _TILE, n)
-        for bj in range(0, bi, _TILE):
-            je = bj + _TILE
-            _load_t(P, bi, ie, bj, je, PT)
-            for ii in range(ie - bi):
-                i = bi + ii
-                p_row = P[i, bj:je]
-                w_row = Wm[i, bj:je]
-                o_row = Wo[i, bj:je]
-                pt_row = PT[ii]
-                vt_row = VT[ii]
-                for jj in range(_TILE):
-                    v = w_row[jj] + h * (p_row[jj] + s * pt_row[jj].conjugate())
-                    o_row[jj] = v
-                    vt_row[jj] = s * v.conjugate()
-                    acc += abs(v.real) + abs(v.imag)
-            _store_t(VT, Wo, bi, ie, bj)
-        for i in range(bi, ie):  # the diagonal tile
-            for j in range(bi, i + 1):
-                v = Wm[i, j] + h * (P[i, j] + s * P[j, i].conjugate())
-                Wo[i, j] = v
-                Wo[j, i] = s * v.conjugate()
-                acc += abs(v.real) + abs(v.imag)
-    if sp[2]:
-        _remove_trace(Wn, n)
-    return math.isfinite(acc)
+        return f
+
+    return Layout(
+        f"{name} in the kernel's frame", rec, to_units=to_units, from_units=back(alg),
+        offsets_from_units=back(stage), rows_from_flat=back(alg), identity=False,
+        field=ElementwiseLinear(kernel.coeff).field(), restart_at_saves=True,
+    )  # fmt: skip

@@ -1,33 +1,33 @@
-r"""The one compiled time loop: every layout, every kernel, every member.
+r"""The one compiled time loop: every layout, every stage, every kernel, every member.
 
-:func:`run_member` advances one ensemble member by ``nsteps`` steps. A step is one or more
-substeps (a composition :math:`\Phi_h = \phi_{g_1 h} \circ \dots \circ \phi_{g_P h}`; one
-substep with :math:`g_1 = 1` for the plain method), each a fixed-point solve for the stage
-``X`` of a midpoint-type method:
+:func:`run_unit` advances one *unit* of a layout (one ensemble member, or ``L`` members
+interleaved as SIMD lanes, :func:`~isoflow._compiled.blocks.lanes`) by ``plan.nsteps`` steps. A
+step is one or more substeps (a composition :math:`\Phi_h = \phi_{g_1 h} \circ \dots \circ
+\phi_{g_P h}`; one substep with :math:`g_1 = 1` for the plain method), each an optional explicit
+part (``begin``, a split step's flow) and a fixed-point solve for the stage ``X`` of a
+midpoint-type method,
 
 .. math::
 
-    X = G(X), \qquad W_{k+1} = \Pi\big(W_k + h\, C(X)\big),
+    X = G(X), \qquad W_{k+1} = \text{finish}(W_k, X),
 
-where the *stage* functions of a layout (:mod:`isoflow._compiled.dense`,
-:mod:`isoflow._compiled.particles`, :mod:`isoflow._compiled.spin_chain`) evaluate ``G`` with
-its auxiliary output ``C`` (``iterate``) and the new state (``finish``); they call the kernel's
-``f(X, B, *args)`` for ``B``. Everything else exists here once:
+where the stage (:mod:`isoflow._compiled.stages`) evaluates ``G`` per lane with its auxiliary
+output (``iterate``) and the new state (``finish``). Everything else exists here once:
 
 * the extrapolated initial guess and the ring of stage offsets (:mod:`isoflow._compiled.flat`),
   one ring per substep position (substeps of different lengths keep separate histories);
-* the stopping rules of :mod:`isoflow.nonlinear` (a numba compilation of the same function)
-  and Anderson mixing;
+* the stopping rules of :mod:`isoflow.nonlinear` (a numba compilation of the same function),
+  per lane, and Anderson mixing (one lane per unit);
 * failure bookkeeping: a member whose solve fails (or whose state turns non-finite) is frozen
   at its last good state, and its record says at which step, why, after how many iterations
   and with which residual; the other members go on;
-* saving: the state after every ``save_every``-th step (and after step ``k_final``) is
-  written into the member's rows of the output buffer.
+* saving: the state after every save point of the plan (:class:`isoflow._save_grid.SaveGrid`)
+  goes into the unit's members' rows of the output buffer.
 
-Members are independent, so each runs all its steps on its own (member-outer loops); the
-drivers run the members in sequence (:func:`drive_serial`) or over numba threads
-(:func:`drive_parallel`). The per-step arithmetic of a member does not depend on how many
-steps a call takes, so a run split into calls anywhere gives the same states bit for bit.
+Units are independent, so each runs all its steps on its own (unit-outer loops); the drivers
+run the units in sequence (:func:`drive_serial`) or over numba threads (:func:`drive_parallel`).
+The per-step arithmetic of a member does not depend on how many steps a call takes, so a run
+split into calls anywhere gives the same states bit for bit.
 
 Record layout (``rec``, one row of ``REC_SIZE`` floats per member): see the ``REC_*`` indices.
 """
@@ -39,6 +39,7 @@ import math
 import numba
 import numpy as np
 
+from . import blocks
 from .flat import anderson, copy, guess, push
 from .rules import CONTINUE, STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE, stopping_step
 
@@ -54,10 +55,10 @@ __all__ = [
     "REC_SIZE",
     "drive_parallel",
     "drive_serial",
-    "run_member",
+    "run_unit",
 ]
 
-#: Step (global index) at which the member failed, ``-1`` while it is alive.
+#: Step (global index, from 1) at which the member failed, ``-1`` while it is alive.
 REC_FAIL_STEP = 0
 #: Status code of the failed solve (``STATUS_NON_FINITE`` for a non-finite new state).
 REC_FAIL_STATUS = 1
@@ -78,127 +79,198 @@ REC_CALL_DONE = 7
 REC_SIZE = 8
 
 
-@numba.njit(cache=True)
-def run_member(  # type: ignore[no-untyped-def]
-    iterate, finish, f, fargs, sp, nwork,
-    W, ring, head, nh, coefs, kmax, gammas,
-    h, nsteps, k0, save_every, k_final, out,
-    rtol, atol, stall_rtol, divf, max_iter, mem, reg, rec,
-):  # fmt: skip
-    """Advance one member (flat state ``W``, its ``ring`` ``(P, K, S)`` and ``head``/``nh``
-    ``(P,)``) by ``nsteps`` steps starting after global step ``k0``; see the module docstring.
+@numba.njit(cache=True, inline="always")
+def _record_failure(rec, k, code, its, r):  # type: ignore[no-untyped-def]
+    """Mark a member's record failed at step ``k``."""
+    rec[REC_FAIL_STEP] = k
+    rec[REC_FAIL_STATUS] = code
+    rec[REC_FAIL_ITERATIONS] = its
+    rec[REC_FAIL_RESIDUAL] = r
 
-    Returns the number of steps taken (``nsteps``, or fewer if the member failed; a member
-    that is already frozen only fills its rows).
-    """
+
+@numba.njit(cache=True)
+def run_unit(  # type: ignore[no-untyped-def]
+    begin, iterate, finish, f, fargs, lay, mp, nwork,
+    W, ring, head, nh, coefs, gammas, plan, data, out, solver, rec, m0,
+):  # fmt: skip
+    """Advance one unit (flat state ``W``, its ``ring`` ``(P, K, S)`` and ``head``/``nh``
+    ``(P,)``) by ``plan.nsteps`` steps; its lanes are the members ``m0, m0 + 1, ...`` (those
+    below ``rec.shape[0]``). See the module docstring."""
     S = W.shape[0]
     P = gammas.shape[0]
     K = ring.shape[1]
+    L = blocks.lanes(lay)
+    M = rec.shape[0]
+    nv = min(L, M - m0)  # valid lanes (the last unit may be padded)
     dt = W.dtype
+    h = plan.h
+    k0 = plan.k0
+    every = plan.save_every
+    k_final = plan.k_final
+    mem = solver.anderson
+    alive = np.zeros(L, dtype=np.bool_)
+    n_alive = 0
+    for q in range(nv):
+        if rec[m0 + q, REC_FAIL_STEP] < 0:
+            alive[q] = True
+            n_alive += 1
     row = 0
-    if rec[REC_FAIL_STEP] >= 0:  # frozen earlier: its saved rows repeat its last good state
-        for step in range(nsteps):
+    if n_alive == 0:  # frozen earlier: the saved rows repeat the last good states
+        for step in range(plan.nsteps):
             k = k0 + step + 1
-            if k % save_every == 0 or k == k_final:
-                copy(out[row], W)
+            if k % every == 0 or k == k_final:
+                blocks.store(lay, out, row, m0, nv, W)
                 row += 1
-        rec[REC_CALL_DONE] = 1.0
-        return 0
+        for q in range(nv):
+            rec[m0 + q, REC_CALL_DONE] = 1.0
+        return
     X = np.empty(S, dtype=dt)
     G = np.empty(S, dtype=dt)
     aux = np.empty(S, dtype=dt)
     Wn = np.empty(S, dtype=dt)
     work = np.empty((max(nwork, 1), S), dtype=dt)
     Wstart = np.empty(S if P > 1 else 1, dtype=dt)
+    D = data.shape[2]
+    sd = np.empty((L, D))
     mm = max(mem, 1)
-    dF = np.empty((mm, S if mem > 0 else 1), dtype=dt)
-    dG = np.empty((mm, S if mem > 0 else 1), dtype=dt)
-    fprev = np.empty(S if mem > 0 else 1, dtype=dt)
-    gprev = np.empty(S if mem > 0 else 1, dtype=dt)
-    fcur = np.empty(S if mem > 0 else 1, dtype=dt)
+    Sa = S if mem > 0 else 1
+    dF = np.empty((mm, Sa), dtype=dt)
+    dG = np.empty((mm, Sa), dtype=dt)
+    fprev = np.empty(Sa, dtype=dt)
+    gprev = np.empty(Sa, dtype=dt)
+    fcur = np.empty(Sa, dtype=dt)
     gram = np.zeros((mm, mm))
     gamma = np.zeros(mm)
-    it_tot = 0
-    it_max = 0
-    res_max = 0.0
-    taken = nsteps
-    to_save = save_every - k0 % save_every  # steps until the next k with k % save_every == 0
-    for step in range(nsteps):
+    rr = np.zeros(L)
+    fin = np.ones(L, dtype=np.bool_)
+    scale2 = np.zeros(L)
+    going = np.zeros(L, dtype=np.bool_)
+    ok = np.zeros(L, dtype=np.bool_)
+    code = np.zeros(L, dtype=np.int64)
+    fail_code = np.zeros(L, dtype=np.int64)
+    its_p = np.zeros(L, dtype=np.int64)
+    its = np.zeros(L, dtype=np.int64)
+    res = np.zeros(L)
+    prev = np.zeros(L)
+    first = np.zeros(L)
+    tol = np.zeros(L)
+    floor = np.zeros(L)
+    it_tot = np.zeros(L, dtype=np.int64)
+    it_max = np.zeros(L, dtype=np.int64)
+    res_max = np.zeros(L)
+    fail_res = np.zeros(L)
+    restore = np.zeros(L, dtype=np.bool_)
+    to_save = every - k0 % every  # steps until the next k with k % every == 0
+    for step in range(plan.nsteps):
         k = k0 + step + 1
+        if D > 0:
+            for q in range(L):
+                for j in range(D):
+                    sd[q, j] = data[step, m0 + q, j]
         if P > 1:
             copy(Wstart, W)
-        its = 0
-        failed = False
-        code = STATUS_CONVERGED
-        r = 0.0
+        for q in range(L):
+            its[q] = 0
+            ok[q] = alive[q]
+        n_ok = n_alive
         for p in range(P):
             hp = gammas[p] * h
-            half = 0.5 * hp
-            quarter = 0.25 * hp * hp
-            scale = math.sqrt(guess(W, ring[p], head[p], nh[p], coefs, X))
-            tol = atol + rtol * scale
-            floor = stall_rtol * scale
-            prev = math.inf
-            first = math.inf
-            code = STATUS_MAX_ITER
-            r = math.inf
-            it = 0
-            for it in range(1, max_iter + 1):
-                rr = iterate(f, fargs, sp, W, X, G, aux, work, half, quarter)
-                r = math.sqrt(rr)
-                c, prev, first = stopping_step(r, prev, first, it, tol, floor, divf)
-                if c != CONTINUE:
-                    code = c
+            if plan.begin:
+                begin(f, fargs, lay, mp, sd, W, hp)
+            guess(W, ring[p], head[p], nh[p], coefs, X)
+            blocks.lane_sumsq(lay, W, scale2)
+            for q in range(L):
+                sc = math.sqrt(scale2[q])
+                tol[q] = solver.atol + solver.rtol * sc
+                floor[q] = solver.stall_rtol * sc
+                prev[q] = math.inf
+                first[q] = math.inf
+                code[q] = STATUS_MAX_ITER
+                res[q] = math.inf
+                its_p[q] = 0
+                going[q] = ok[q]
+            for it in range(1, solver.max_iter + 1):
+                iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr)
+                more = False
+                for q in range(L):
+                    if going[q]:
+                        r = math.sqrt(rr[q])
+                        res[q] = r
+                        its_p[q] = it
+                        c, prev[q], first[q] = stopping_step(
+                            r, prev[q], first[q], it, tol[q], floor[q], solver.divergence_factor
+                        )
+                        if c != CONTINUE:
+                            code[q] = c
+                            going[q] = False
+                        else:
+                            more = True
+                if not more:
                     break
-                if mem > 0:
-                    anderson(it, X, G, dF, dG, gram, fprev, gprev, fcur, gamma, reg)
-                else:
+                if mem > 0:  # one lane per unit (the runner's rule)
+                    anderson(it, X, G, dF, dG, gram, fprev, gprev, fcur, gamma,
+                             solver.regularization)  # fmt: skip
+                elif L == 1:
                     X, G = G, X
-            its += it
-            fin = finish(f, fargs, sp, W, X, aux, work, hp, Wn)
-            if code != STATUS_CONVERGED or not fin:
-                if code == STATUS_CONVERGED:
-                    code = STATUS_NON_FINITE
-                failed = True
+                else:
+                    blocks.select_lanes(lay, X, G, going)
+            finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin)
+            for q in range(L):
+                if not ok[q]:
+                    continue
+                its[q] += its_p[q]
+                if code[q] != STATUS_CONVERGED or not fin[q]:
+                    ok[q] = False
+                    n_ok -= 1
+                    fail_code[q] = code[q] if code[q] != STATUS_CONVERGED else STATUS_NON_FINITE
+                    fail_res[q] = res[q]
+                elif res[q] > res_max[q]:
+                    res_max[q] = res[q]
+            if n_ok == 0:
                 break
-            if r > res_max:
-                res_max = r
-            if kmax > 0:
+            if plan.kmax > 0:
                 slot = head[p] + 1
                 if slot == K:
                     slot = 0
                 push(ring[p], slot, X, W)
                 head[p] = slot
-                nh[p] = min(nh[p] + 1, kmax)
-            copy(W, Wn)
-        it_tot += its
-        if its > it_max:
-            it_max = its
-        if failed:
-            if P > 1:
-                copy(W, Wstart)
-            rec[REC_FAIL_STEP] = k
-            rec[REC_FAIL_STATUS] = code
-            rec[REC_FAIL_ITERATIONS] = its
-            rec[REC_FAIL_RESIDUAL] = r
-            taken = step
-            for rest in range(step, nsteps):  # frozen: the remaining rows repeat W
-                kk = k0 + rest + 1
-                if kk % save_every == 0 or kk == k_final:
-                    copy(out[row], W)
-                    row += 1
-            break
+                nh[p] = min(nh[p] + 1, plan.kmax)
+            blocks.commit_lanes(lay, W, Wn, ok)
+        failed_now = False
+        for q in range(L):
+            failed = alive[q] and not ok[q]
+            restore[q] = failed
+            if not alive[q]:
+                continue
+            it_tot[q] += its[q]
+            if its[q] > it_max[q]:
+                it_max[q] = its[q]
+            if failed:  # frozen at the state before this step
+                alive[q] = False
+                n_alive -= 1
+                failed_now = True
+                _record_failure(rec[m0 + q], k, fail_code[q], its[q], fail_res[q])
+        if failed_now and P > 1:  # earlier substeps of the step were committed: undo them
+            blocks.commit_lanes(lay, W, Wstart, restore)
         to_save -= 1
-        if to_save == 0 or k == k_final:  # k % save_every == 0, without a division per step
-            copy(out[row], W)
+        if to_save == 0 or k == k_final:  # k % every == 0, without a division per step
+            blocks.store(lay, out, row, m0, nv, W)
             row += 1
         if to_save == 0:
-            to_save = save_every
-    rec[REC_ITERATIONS] += it_tot
-    rec[REC_ITERATIONS_MAX] = max(rec[REC_ITERATIONS_MAX], it_max)
-    rec[REC_RESIDUAL_MAX] = max(rec[REC_RESIDUAL_MAX], res_max)
-    rec[REC_CALL_DONE] = 1.0
-    return taken
+            to_save = every
+        if n_alive == 0:  # every lane frozen: the remaining rows repeat the states
+            for rest in range(step + 1, plan.nsteps):
+                kk = k0 + rest + 1
+                if kk % every == 0 or kk == k_final:
+                    blocks.store(lay, out, row, m0, nv, W)
+                    row += 1
+            break
+    for q in range(nv):
+        m = m0 + q
+        rec[m, REC_ITERATIONS] += it_tot[q]
+        rec[m, REC_ITERATIONS_MAX] = max(rec[m, REC_ITERATIONS_MAX], it_max[q])
+        rec[m, REC_RESIDUAL_MAX] = max(rec[m, REC_RESIDUAL_MAX], res_max[q])
+        rec[m, REC_CALL_DONE] = 1.0
 
 
 # The drivers are compiled per run signature by :func:`isoflow._compiled.signatures.
@@ -207,32 +279,26 @@ def run_member(  # type: ignore[no-untyped-def]
 # bytecode only (not by ``parallel=``), so one body compiled twice with ``cache=True`` would
 # share a cache entry and one variant could load the other.
 def drive_serial(  # type: ignore[no-untyped-def]
-    iterate, finish, f, fargs, sp, nwork,
-    W, ring, head, nh, coefs, kmax, gammas,
-    h, nsteps, k0, save_every, k_final, out,
-    rtol, atol, stall_rtol, divf, max_iter, mem, reg, rec,
+    begin, iterate, finish, f, fargs, lay, mp, nwork,
+    W, ring, head, nh, coefs, gammas, plan, data, out, solver, rec,
 ):  # fmt: skip
-    """:func:`run_member` for every member ``m`` of ``W`` (``(M, S)``), one after another."""
-    for m in range(W.shape[0]):
-        run_member(
-            iterate, finish, f, fargs, sp, nwork,
-            W[m], ring[m], head[m], nh[m], coefs, kmax, gammas,
-            h, nsteps, k0, save_every, k_final, out[:, m],
-            rtol, atol, stall_rtol, divf, max_iter, mem, reg, rec[m],
+    """:func:`run_unit` for every unit ``u`` of ``W`` (``(U, S)``), one after another."""
+    L = blocks.lanes(lay)
+    for u in range(W.shape[0]):
+        run_unit(
+            begin, iterate, finish, f, fargs, lay, mp, nwork,
+            W[u], ring[u], head[u], nh[u], coefs, gammas, plan, data, out, solver, rec, u * L,
         )  # fmt: skip
 
 
 def drive_parallel(  # type: ignore[no-untyped-def]
-    iterate, finish, f, fargs, sp, nwork,
-    W, ring, head, nh, coefs, kmax, gammas,
-    h, nsteps, k0, save_every, k_final, out,
-    rtol, atol, stall_rtol, divf, max_iter, mem, reg, rec,
+    begin, iterate, finish, f, fargs, lay, mp, nwork,
+    W, ring, head, nh, coefs, gammas, plan, data, out, solver, rec,
 ):  # fmt: skip
-    """:func:`run_member` for every member of ``W``, members spread over numba threads."""
-    for m in numba.prange(W.shape[0]):
-        run_member(
-            iterate, finish, f, fargs, sp, nwork,
-            W[m], ring[m], head[m], nh[m], coefs, kmax, gammas,
-            h, nsteps, k0, save_every, k_final, out[:, m],
-            rtol, atol, stall_rtol, divf, max_iter, mem, reg, rec[m],
+    """:func:`run_unit` for every unit of ``W``, units over numba threads."""
+    L = blocks.lanes(lay)
+    for u in numba.prange(W.shape[0]):
+        run_unit(
+            begin, iterate, finish, f, fargs, lay, mp, nwork,
+            W[u], ring[u], head[u], nh[u], coefs, gammas, plan, data, out, solver, rec, u * L,
         )  # fmt: skip

@@ -1,8 +1,8 @@
-r"""Compiled stages on the particle spaces: ``N`` particles in :math:`\mathbb{R}^3`, ``(N, 3)``.
+r"""The particle layouts: ``N`` particles in :math:`\mathbb{R}^3`, an ``(N, 3)`` array.
 
-IsoMP on :math:`(\mathbb{R}^3,\times)^N` (:class:`~isoflow.algebras.SpinVectors`) and on
-:math:`(\mathbb{R}^3,\times_L)^N` (:class:`~isoflow.algebras.SL2Vectors`, the hyperbolic
-midpoint) uses the vector forms of the bracket and of the triple product, per particle with
+On :math:`(\mathbb{R}^3,\times)^N` (:class:`~isoflow.algebras.SpinVectors`, record
+:class:`Particles3`) and :math:`(\mathbb{R}^3,\times_L)^N` (:class:`~isoflow.algebras.SL2Vectors`,
+record :class:`ParticlesL`) the bracket and the triple product act per particle, with
 ``b = B_i(X)``, ``x = X_i``:
 
 .. math::
@@ -12,35 +12,53 @@ midpoint) uses the vector forms of the bracket and of the triple product, per pa
         \bigl(-2L(b \times x),\; 2 (b\cdot_L x)\, b - (b\cdot_L b)\, x\bigr)
             & (\mathbb{R}^3, \times_L),
     \end{cases}
-    \qquad G_i = w_i + \tfrac h2 C_i + \tfrac{h^2}{4} T_i,
 
-and :math:`w_{k+1} = w + h\,C` (the same formulas as
-:meth:`SpinVectors.bracket_and_triple <isoflow.algebras.SpinVectors.bracket_and_triple>` and
-:meth:`SL2Vectors.bracket_and_triple <isoflow.algebras.SL2Vectors.bracket_and_triple>`).
+the formulas of :meth:`SpinVectors.bracket_and_triple
+<isoflow.algebras.SpinVectors.bracket_and_triple>` and :meth:`SL2Vectors.bracket_and_triple
+<isoflow.algebras.SL2Vectors.bracket_and_triple>`. Every real ``(N, 3)`` array lies in these
+spaces: no projection. The spherical midpoint's point of a particle (on
+:math:`(\mathbb{R}^3,\times)` only) is :math:`m_i = \sqrt{|w_i|\,|2M_i - w_i|}\; M_i/|M_i|`.
 
-The spherical midpoint (:class:`~isoflow.SphericalMidpoint`, on :math:`(\mathbb{R}^3,\times)^N`)
-iterates on the plain average ``M``:
-
-.. math::
-
-    m_i = \sqrt{|w_i|\,|2M_i - w_i|}\; M_i/|M_i|, \qquad
-    G_i = w_i + \tfrac h2\, B_i(m) \times m_i, \qquad w_{k+1} = w + h\, B(m) \times m .
-
-``B`` is the kernel's ``f(X, B, *args)`` on the ``(N, 3)`` arrays; ``sp = (N,)``. The
-interface is that of :mod:`isoflow._compiled.driver`; ``aux`` receives ``C``.
+The per-particle formulas (:func:`so3_forms`, :func:`sl2_forms`, :func:`spherical_factor`) are
+shared with the point-vortex and spin-chain layouts, so every layout gives the same iterates.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numba
+import numpy as np
 
-__all__ = ["finish", "iterate_sl2", "iterate_smm", "iterate_so3"]
+from ..algebras import SL2Vectors, SpinVectors
+from . import blocks
+from .layout import Layout, member_layout
+
+__all__ = [
+    "Particles3",
+    "ParticlesL",
+    "particle_layout",
+    "sl2_forms",
+    "so3_forms",
+    "spherical_factor",
+]
+
+
+class Particles3(NamedTuple):
+    r""":math:`(\mathbb{R}^3,\times)^N`, the kernel's field."""
+
+    N: int
+
+
+class ParticlesL(NamedTuple):
+    r""":math:`(\mathbb{R}^3,\times_L)^N`, the kernel's field."""
+
+    N: int
 
 
 @numba.njit(cache=True, inline="always")
-def _so3(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
+def so3_forms(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
     r"""``(C, T)`` on :math:`(\mathbb{R}^3,\times)`: ``b x x`` and ``-(b . x) b``."""
     d = -(b0 * x0 + b1 * x1 + b2 * x2)
     return (
@@ -50,7 +68,7 @@ def _so3(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _sl2(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
+def sl2_forms(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
     r"""``(C, T)`` on :math:`(\mathbb{R}^3,\times_L)`: ``-2L(b x x)`` and
     ``2 (b ._L x) b - (b ._L b) x``."""
     bx = b0 * x0 + b1 * x1 - b2 * x2
@@ -59,49 +77,6 @@ def _sl2(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
         -2.0 * (b1 * x2 - b2 * x1), -2.0 * (b2 * x0 - b0 * x2), 2.0 * (b0 * x1 - b1 * x0),
         2.0 * bx * b0 - bb * x0, 2.0 * bx * b1 - bb * x1, 2.0 * bx * b2 - bb * x2,
     )  # fmt: skip
-
-
-@numba.njit(cache=True, inline="always")
-def _put(W, G, aux, j, c0, c1, c2, g0, g1, g2, x0, x1, x2):  # type: ignore[no-untyped-def]
-    """Store ``G`` and ``C`` of particle ``j // 3``; its contribution to ``|G - X|^2``."""
-    G[j] = g0
-    G[j + 1] = g1
-    G[j + 2] = g2
-    aux[j] = c0
-    aux[j + 1] = c1
-    aux[j + 2] = c2
-    return (g0 - x0) ** 2 + (g1 - x1) ** 2 + (g2 - x2) ** 2
-
-
-@numba.njit(cache=True, inline="always")
-def _isomp(form, f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """One IsoMP iteration with the products ``form`` (:func:`_so3` or :func:`_sl2`)."""
-    N = sp[0]
-    Xm = X.reshape((N, 3))
-    Bm = work[0].reshape((N, 3))
-    f(Xm, Bm, *fargs)
-    rr = 0.0
-    for i in range(N):
-        x0, x1, x2 = Xm[i, 0], Xm[i, 1], Xm[i, 2]
-        c0, c1, c2, t0, t1, t2 = form(Bm[i, 0], Bm[i, 1], Bm[i, 2], x0, x1, x2)
-        j = 3 * i
-        g0 = W[j] + half * c0 + quarter * t0
-        g1 = W[j + 1] + half * c1 + quarter * t1
-        g2 = W[j + 2] + half * c2 + quarter * t2
-        rr += _put(W, G, aux, j, c0, c1, c2, g0, g1, g2, x0, x1, x2)
-    return rr
-
-
-@numba.njit(cache=True)
-def iterate_so3(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    r"""One IsoMP iteration on :math:`(\mathbb{R}^3,\times)^N`."""
-    return _isomp(_so3, f, fargs, sp, W, X, G, aux, work, half, quarter)
-
-
-@numba.njit(cache=True)
-def iterate_sl2(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    r"""One IsoMP iteration on :math:`(\mathbb{R}^3,\times_L)^N` (the hyperbolic midpoint)."""
-    return _isomp(_sl2, f, fargs, sp, W, X, G, aux, work, half, quarter)
 
 
 @numba.njit(cache=True, inline="always")
@@ -115,54 +90,132 @@ def spherical_factor(w0, w1, w2, a0, a1, a2):  # type: ignore[no-untyped-def]
     return math.sqrt(nw * nv) / nm if nm > 0 else 0.0
 
 
-@numba.njit(cache=True, inline="always")
-def spherical_point(W, M, mid, N):  # type: ignore[no-untyped-def]
-    """``mid_i = sqrt(|w_i| |2M_i - w_i|) M_i / |M_i|`` (``0`` where ``M_i = 0``), flat."""
-    for i in range(N):
-        j = 3 * i
-        w0, w1, w2 = W[j], W[j + 1], W[j + 2]
-        a0, a1, a2 = M[j], M[j + 1], M[j + 2]
-        fac = spherical_factor(w0, w1, w2, a0, a1, a2)
-        mid[j] = fac * a0
-        mid[j + 1] = fac * a1
-        mid[j + 2] = fac * a2
+# ---- blocks (flat (N, 3) arrays: particle i at 3i, 3i+1, 3i+2) --------------------------------
 
 
 @numba.njit(cache=True, inline="always")
-def smm_update(W, X, G, aux, B, mid, N, half):  # type: ignore[no-untyped-def]
-    """``C = B x m``, ``G = W + h/2 C`` from the field ``B`` at the points ``mid`` (flat);
-    returns ``|G - X|^2``."""
-    rr = 0.0
+def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
+    N = lay.N
+    f(X.reshape((N, 3)), B.reshape((N, 3)), *fargs)
+
+
+@numba.njit(cache=True, inline="always")
+def _forms_into(form, N, B, X, C, T):  # type: ignore[no-untyped-def]
     for i in range(N):
         j = 3 * i
-        m0, m1, m2 = mid[j], mid[j + 1], mid[j + 2]
-        b0, b1, b2 = B[j], B[j + 1], B[j + 2]
-        c0 = b1 * m2 - b2 * m1
-        c1 = b2 * m0 - b0 * m2
-        c2 = b0 * m1 - b1 * m0
-        g0 = W[j] + half * c0
-        g1 = W[j + 1] + half * c1
-        g2 = W[j + 2] + half * c2
-        rr += _put(W, G, aux, j, c0, c1, c2, g0, g1, g2, X[j], X[j + 1], X[j + 2])
-    return rr
+        c0, c1, c2, t0, t1, t2 = form(B[j], B[j + 1], B[j + 2], X[j], X[j + 1], X[j + 2])
+        C[j] = c0
+        C[j + 1] = c1
+        C[j + 2] = c2
+        T[j] = t0
+        T[j + 1] = t1
+        T[j + 2] = t2
 
 
-@numba.njit(cache=True)
-def iterate_smm(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """One spherical-midpoint iteration on the average ``M = X``; ``work[1]`` holds ``m``."""
-    N = sp[0]
-    mid = work[1]
-    spherical_point(W, X, mid, N)
-    f(mid.reshape((N, 3)), work[0].reshape((N, 3)), *fargs)
-    return smm_update(W, X, G, aux, work[0], mid, N, half)
+@numba.njit(cache=True, inline="always")
+def _bracket_into(form, N, B, X, C):  # type: ignore[no-untyped-def]
+    for i in range(N):
+        j = 3 * i
+        c0, c1, c2, _, _, _ = form(B[j], B[j + 1], B[j + 2], X[j], X[j + 1], X[j + 2])
+        C[j] = c0
+        C[j + 1] = c1
+        C[j + 2] = c2
 
 
-@numba.njit(cache=True)
-def finish(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
-    """``Wn = W + h C`` (every real ``(N, 3)`` array lies in the space); returns finiteness."""
+@numba.njit(cache=True, inline="always")
+def so3_bracket_triple(lay, B, X, C, T):  # type: ignore[no-untyped-def]
+    """The block on :math:`(\\mathbb{R}^3,\\times)^N` (any record with ``N``)."""
+    _forms_into(so3_forms, lay.N, B, X, C, T)
+
+
+@numba.njit(cache=True, inline="always")
+def sl2_bracket_triple(lay, B, X, C, T):  # type: ignore[no-untyped-def]
+    """The block on :math:`(\\mathbb{R}^3,\\times_L)^N`."""
+    _forms_into(sl2_forms, lay.N, B, X, C, T)
+
+
+@numba.njit(cache=True, inline="always")
+def so3_bracket(lay, B, X, C):  # type: ignore[no-untyped-def]
+    """``C = B x X`` per particle."""
+    _bracket_into(so3_forms, lay.N, B, X, C)
+
+
+@numba.njit(cache=True, inline="always")
+def sl2_bracket(lay, B, X, C):  # type: ignore[no-untyped-def]
+    """``C = -2L(B x X)`` per particle."""
+    _bracket_into(sl2_forms, lay.N, B, X, C)
+
+
+@numba.njit(cache=True, inline="always")
+def flat_stage_update(lay, W, a, C, b, T, G, X, rr):  # type: ignore[no-untyped-def]
+    """``G = W + a C + b T`` (no projection: every real array is in the space)."""
     acc = 0.0
     for i in range(W.shape[0]):
-        v = W[i] + h * aux[i]
+        g = W[i] + a * C[i] + b * T[i]
+        G[i] = g
+        acc += (g - X[i]) ** 2
+    rr[0] = acc
+
+
+@numba.njit(cache=True, inline="always")
+def flat_stage_update1(lay, W, a, C, G, X, rr):  # type: ignore[no-untyped-def]
+    """``G = W + a C``."""
+    acc = 0.0
+    for i in range(W.shape[0]):
+        g = W[i] + a * C[i]
+        G[i] = g
+        acc += (g - X[i]) ** 2
+    rr[0] = acc
+
+
+@numba.njit(cache=True, inline="always")
+def flat_advance_state(lay, W, h, C, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = W + h C``; ``fin[0]`` whether it is finite."""
+    acc = 0.0
+    for i in range(W.shape[0]):
+        v = W[i] + h * C[i]
         Wn[i] = v
         acc += abs(v)
-    return math.isfinite(acc)
+    fin[0] = math.isfinite(acc)
+
+
+@numba.njit(cache=True, inline="always")
+def so3_spherical_point(lay, W, M, mid):  # type: ignore[no-untyped-def]
+    """``mid_i = sqrt(|w_i| |2M_i - w_i|) M_i / |M_i|`` (``0`` where ``M_i = 0``)."""
+    for i in range(lay.N):
+        j = 3 * i
+        fac = spherical_factor(W[j], W[j + 1], W[j + 2], M[j], M[j + 1], M[j + 2])
+        mid[j] = fac * M[j]
+        mid[j + 1] = fac * M[j + 1]
+        mid[j + 2] = fac * M[j + 2]
+
+
+def provide_particle_blocks(so3: tuple[type, ...], sl2: tuple[type, ...]) -> None:
+    """Register the particle blocks (all but ``evaluate_B``) for particle layout records."""
+    for cls in so3 + sl2:
+        blocks.provide(blocks.stage_update, cls)(flat_stage_update)
+        blocks.provide(blocks.stage_update1, cls)(flat_stage_update1)
+        blocks.provide(blocks.advance_state, cls)(flat_advance_state)
+    for cls in so3:
+        blocks.provide(blocks.bracket_triple, cls)(so3_bracket_triple)
+        blocks.provide(blocks.bracket, cls)(so3_bracket)
+        blocks.provide(blocks.spherical_point, cls)(so3_spherical_point)
+    for cls in sl2:
+        blocks.provide(blocks.bracket_triple, cls)(sl2_bracket_triple)
+        blocks.provide(blocks.bracket, cls)(sl2_bracket)
+    blocks.provide_member_defaults(*so3, *sl2)
+
+
+blocks.provide(blocks.evaluate_B, Particles3, ParticlesL)(_evaluate_B)
+provide_particle_blocks((Particles3,), (ParticlesL,))
+
+
+def particle_layout(problem: Any, members: int) -> Layout | None:
+    """The generic particle layout (the kernel's field on ``(N, 3)`` views), or ``None``."""
+    alg = problem.algebra
+    N = alg.shape[0]
+    if type(alg) is SpinVectors:
+        return member_layout("(R^3, x)^N", Particles3(N), alg.shape, np.float64)
+    if type(alg) is SL2Vectors:
+        return member_layout("(R^3, x_L)^N", ParticlesL(N), alg.shape, np.float64)
+    return None

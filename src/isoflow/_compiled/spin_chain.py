@@ -17,26 +17,58 @@ one sweep that forms ``B_i`` from the neighbours on the fly:
 and order of operations as :mod:`isoflow._compiled.particles`, so both give the same iterates.
 Chains with many spins are cut into chunks over numba threads (the ``*_par`` stages).
 
-``sp = (N, c, nch)``: the number of spins, the coupling and the number of chunks.
+The record :class:`SpinChain` holds the number of spins, the coupling and the number of chunks.
+The layout also provides the generic blocks (on the ``(3, N)`` layout), so every method with a
+compiled stage runs on it; IsoMP and the spherical midpoint run the fused sweeps below, their
+named specializations (benchmarks 4 and 5).
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
 
-from .particles import spherical_factor
+from ..algebras import SpinVectors
+from ..kernels import SpinNeighbourSum
+from . import blocks
+from .layout import Layout
+from .particles import (
+    flat_advance_state,
+    flat_stage_update,
+    flat_stage_update1,
+    so3_forms,
+    spherical_factor,
+)
 
 __all__ = [
+    "PARALLEL_MIN_SPINS",
+    "SpinChain",
+    "chain_layout",
     "finish_iso",
     "finish_smm",
+    "isomp_sweeps",
     "iterate_iso_par",
     "iterate_iso_ser",
     "iterate_smm_par",
     "iterate_smm_ser",
+    "spherical_sweeps",
 ]
+
+#: Smallest spin chain whose sweeps are cut into chunks over numba threads.
+PARALLEL_MIN_SPINS = 200_000
+
+
+class SpinChain(NamedTuple):
+    """A periodic chain of ``N`` spins in the ``(3, N)`` layout, ``B_i = c (x_{i-1} +
+    x_{i+1})``; ``nch`` chunks of the fused sweeps (``1``: serial)."""
+
+    N: int
+    c: float
+    nch: int
+
 
 #: Reassociation (and no signed zeros) only: vectorizes the residual reductions.
 _FM = {"reassoc", "nsz"}
@@ -126,23 +158,27 @@ def _smm_range(m, X, W, G, N, c, half, lo, hi):  # type: ignore[no-untyped-def]
 # The stages index the flat (3, N) layout directly (component ``a`` of spin ``i`` at
 # ``a * N + i``): no reshaped views, which numba's parallel lowering does not write through.
 @numba.njit(cache=True)
-def iterate_iso_ser(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+def iterate_iso_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """One IsoMP sweep over the chain (``f`` is not called: ``B`` is formed on the fly)."""
-    N = sp[0]
-    c = sp[1]
-    rr = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter)
+    N = lay.N
+    c = lay.c
+    half = 0.5 * hp
+    quarter = 0.25 * hp * hp
+    acc = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter)
     if N > 1:
-        rr += _iso_range(X, W, G, N, c, half, quarter, 1, N - 1)
-        rr += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
-    return rr
+        acc += _iso_range(X, W, G, N, c, half, quarter, 1, N - 1)
+        acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
+    rr[0] = acc
 
 
 @numba.njit(cache=True, parallel=True)
-def iterate_iso_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """:func:`iterate_iso_ser` with the chain cut into ``sp[2]`` chunks over numba threads."""
-    N = sp[0]
-    c = sp[1]
-    nch = sp[2]
+def iterate_iso_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """:func:`iterate_iso_ser` with the chain cut into ``lay.nch`` chunks over numba threads."""
+    N = lay.N
+    c = lay.c
+    nch = lay.nch
+    half = 0.5 * hp
+    quarter = 0.25 * hp * hp
     size = (N + nch - 1) // nch
     part = np.zeros(nch)
     for ch in numba.prange(nch):
@@ -150,32 +186,34 @@ def iterate_iso_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: i
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
             part[ch] = _iso_range(X, W, G, N, c, half, quarter, lo, hi)
-    rr = part.sum()
-    rr += _iso_one(X, W, G, N, 0, N - 1, 1, c, half, quarter)
-    rr += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
-    return rr
+    acc = part.sum()
+    acc += _iso_one(X, W, G, N, 0, N - 1, 1, c, half, quarter)
+    acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
+    rr[0] = acc
 
 
 @numba.njit(cache=True)
-def iterate_smm_ser(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
+def iterate_smm_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """One spherical-midpoint iteration: the points ``m`` (into ``work[0]``), then the sweep."""
-    N = sp[0]
-    c = sp[1]
+    N = lay.N
+    c = lay.c
+    half = 0.5 * hp
     m = work[0]
     _point_range(X, W, m, N, 0, N)
-    rr = _smm_one(m, X, W, G, N, 0, N - 1, 1 % N, c, half)
+    acc = _smm_one(m, X, W, G, N, 0, N - 1, 1 % N, c, half)
     if N > 1:
-        rr += _smm_range(m, X, W, G, N, c, half, 1, N - 1)
-        rr += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
-    return rr
+        acc += _smm_range(m, X, W, G, N, c, half, 1, N - 1)
+        acc += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
+    rr[0] = acc
 
 
 @numba.njit(cache=True, parallel=True)
-def iterate_smm_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: ignore[no-untyped-def]
-    """:func:`iterate_smm_ser` over ``sp[2]`` chunks on numba threads."""
-    N = sp[0]
-    c = sp[1]
-    nch = sp[2]
+def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """:func:`iterate_smm_ser` over ``lay.nch`` chunks on numba threads."""
+    N = lay.N
+    c = lay.c
+    nch = lay.nch
+    half = 0.5 * hp
     m = work[0]
     size = (N + nch - 1) // nch
     part = np.zeros(nch)
@@ -189,10 +227,10 @@ def iterate_smm_par(f, fargs, sp, W, X, G, aux, work, half, quarter):  # type: i
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
             part[ch] = _smm_range(m, X, W, G, N, c, half, lo, hi)
-    rr = part.sum()
-    rr += _smm_one(m, X, W, G, N, 0, N - 1, 1, c, half)
-    rr += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
-    return rr
+    acc = part.sum()
+    acc += _smm_one(m, X, W, G, N, 0, N - 1, 1, c, half)
+    acc += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
+    rr[0] = acc
 
 
 @numba.njit(cache=True, fastmath=_FM)
@@ -218,12 +256,107 @@ def _final(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def finish_iso(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
+def finish_iso(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(X) x X`` from the accepted ``X`` (the bracket of its last evaluation)."""
-    return math.isfinite(_final(X, W, Wn, sp[0], sp[1], h))
+    fin[0] = math.isfinite(_final(X, W, Wn, lay.N, lay.c, hp))
 
 
 @numba.njit(cache=True)
-def finish_smm(f, fargs, sp, W, X, aux, work, h, Wn):  # type: ignore[no-untyped-def]
+def finish_smm(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(m) x m`` with the points ``m`` of the last iteration (``work[0]``)."""
-    return math.isfinite(_final(work[0], W, Wn, sp[0], sp[1], h))
+    fin[0] = math.isfinite(_final(work[0], W, Wn, lay.N, lay.c, hp))
+
+
+def isomp_sweeps(layout: Layout) -> tuple[Any, Any]:
+    """IsoMP's fused specialization on the chain: serial or threaded sweeps."""
+    par = layout.record.nch > 1
+    return (iterate_iso_par if par else iterate_iso_ser), finish_iso
+
+
+def spherical_sweeps(layout: Layout) -> tuple[Any, Any]:
+    """The spherical midpoint's fused specialization on the chain."""
+    par = layout.record.nch > 1
+    return (iterate_smm_par if par else iterate_smm_ser), finish_smm
+
+
+# ---- the generic blocks on the (3, N) layout (component a of spin i at a * N + i) ---------------
+
+
+@numba.njit(cache=True, inline="always")
+def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
+    N = lay.N
+    for i in range(N):
+        im = i - 1 if i > 0 else N - 1
+        ip = i + 1 if i < N - 1 else 0
+        b0, b1, b2 = _b(X, N, lay.c, im, ip)
+        B[i] = b0
+        B[N + i] = b1
+        B[2 * N + i] = b2
+
+
+@numba.njit(cache=True, inline="always")
+def _bracket_triple(lay, B, X, C, T):  # type: ignore[no-untyped-def]
+    N = lay.N
+    for i in range(N):
+        c0, c1, c2, t0, t1, t2 = so3_forms(B[i], B[N + i], B[2 * N + i], X[i], X[N + i],
+                                           X[2 * N + i])  # fmt: skip
+        C[i] = c0
+        C[N + i] = c1
+        C[2 * N + i] = c2
+        T[i] = t0
+        T[N + i] = t1
+        T[2 * N + i] = t2
+
+
+@numba.njit(cache=True, inline="always")
+def _bracket(lay, B, X, C):  # type: ignore[no-untyped-def]
+    N = lay.N
+    for i in range(N):
+        c0, c1, c2, _, _, _ = so3_forms(B[i], B[N + i], B[2 * N + i], X[i], X[N + i],
+                                        X[2 * N + i])  # fmt: skip
+        C[i] = c0
+        C[N + i] = c1
+        C[2 * N + i] = c2
+
+
+@numba.njit(cache=True, inline="always")
+def _spherical_point(lay, W, M, mid):  # type: ignore[no-untyped-def]
+    _point_range(M, W, mid, lay.N, 0, lay.N)
+
+
+blocks.provide(blocks.evaluate_B, SpinChain)(_evaluate_B)
+blocks.provide(blocks.bracket_triple, SpinChain)(_bracket_triple)
+blocks.provide(blocks.bracket, SpinChain)(_bracket)
+blocks.provide(blocks.spherical_point, SpinChain)(_spherical_point)
+blocks.provide(blocks.stage_update, SpinChain)(flat_stage_update)
+blocks.provide(blocks.stage_update1, SpinChain)(flat_stage_update1)
+blocks.provide(blocks.advance_state, SpinChain)(flat_advance_state)
+blocks.provide_member_defaults(SpinChain)
+
+
+def chain_layout(problem: Any, members: int, threads: int) -> Layout | None:
+    r"""The chain layout of a :class:`~isoflow.SpinNeighbourSum` run on
+    :math:`(\mathbb{R}^3,\times)^N` with ``N >= 2``, or ``None``."""
+    alg = problem.algebra
+    kernel = problem.kernel
+    if type(alg) is not SpinVectors or not isinstance(kernel, SpinNeighbourSum):
+        return None
+    N = alg.shape[0]
+    if N < 2:
+        return None
+    par = N >= PARALLEL_MIN_SPINS and threads > 1
+    nch = 8 * threads if par else 1
+
+    def to_units(Y: Any) -> Any:
+        return np.ascontiguousarray(np.swapaxes(Y, -1, -2), dtype=np.float64).reshape(
+            Y.shape[0], -1
+        )
+
+    def from_units(A: Any) -> Any:
+        return np.swapaxes(A.reshape(*A.shape[:-1], 3, N), -1, -2)
+
+    return Layout(
+        f"spin chain ((3, N) layout{', threaded sweeps' if par else ''})",
+        SpinChain(N, float(kernel.coupling), nch), to_units=to_units, from_units=from_units,
+        offsets_from_units=from_units, rows_from_flat=from_units, identity=False,
+    )  # fmt: skip

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import ResultFileError
-from .._stepping import MemberFailures
+from .._failures import MemberFailures
 
 __all__ = [
     "MAX_ELEMENTS",

@@ -34,7 +34,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .._stepping import MemberFailures
+from .._failures import MemberFailures
 from .._version import __version__
 from .codec import crc32, crc_of, encode_failures, encode_json, pack_state
 

@@ -25,7 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import IsoflowError, ResultFileError
-from .._stepping import MemberFailures
+from .._failures import MemberFailures
+from .._save_grid import SaveGrid
 from ..diagnostics import DriftAccumulator
 from .codec import (
     check_shape,
@@ -328,14 +329,18 @@ def read_checkpoint(o: Opened) -> Checkpoint | None:
     n_index = 4 if o.version >= 2 else 2
     index = _int_vector(g["index"], n_index, f"checkpoint slot{slot} index", o)
     step, n_rows = index[0], index[1]
-    n_steps, save_every = int(meta["n_steps"]), int(meta["save_every"])
+    n_steps = int(meta["n_steps"])
     if not 0 <= step <= n_steps:
         raise o.fail(f"checkpoint step {step} outside the run's 0..{n_steps} steps")
+    grid = SaveGrid(int(meta["save_every"]), n_steps)
+    # the start, the save points up to the step, and the last good state of a run whose
+    # members all failed between save points
+    most = 1 + grid.count(0, step) + (0 if grid.is_save(step) else 1)
     have = min((ds.shape[0] for ds in o.rows.values()), default=0)
-    if not 1 <= n_rows <= min(have, step // save_every + 2):
+    if not 1 <= n_rows <= min(have, most):
         raise o.fail(
             f"checkpoint claims {n_rows} saved rows; the file holds {have} and step {step} "
-            f"allows at most {step // save_every + 2}"
+            f"allows at most {most}"
         )
     shape = tuple(meta["state_shape"])
     if tuple(g["y"].shape) != shape or g["y"].dtype.kind not in "biufc":

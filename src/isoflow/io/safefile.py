@@ -25,9 +25,6 @@ from typing import Any
 
 __all__ = ["ReadView", "SafeFile", "lookup3", "superblock_flags"]
 
-#: Errors of a full or failing disk that :class:`SafeFile` records instead of raising.
-WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EIO, errno.EFBIG, errno.EDQUOT})
-
 #: Test hook: called as ``hook(safefile, offset, data)`` before every write to disk. It may
 #: raise ``OSError`` (a failing disk) or copy the file (a kill at this write).
 write_hook: Callable[[SafeFile, int, bytes], None] | None = None

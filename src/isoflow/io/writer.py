@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import ResultFileError, ResultWriteError
-from .._stepping import MemberFailures
+from .._failures import MemberFailures
 from .layout import Handles, create_layout, write_attrs
 from .lock import WriteLock
 from .safefile import SafeFile

@@ -9,7 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import ParameterError
-from ..nonlinear import STATUS_CONVERGED, STATUS_NAMES, NonlinearResult, NonlinearSolver
+from .._failures import NAMES
+from ..nonlinear import STATUS_CONVERGED, NonlinearResult, NonlinearSolver
 from ..problems import IsospectralProblem
 
 __all__ = ["Method", "StepResult", "check_implicit_options"]
@@ -63,7 +64,7 @@ class StepResult:
         if self.status is None or self.success:
             return "converged"
         code = int(self.status[self.status != STATUS_CONVERGED].flat[0])
-        return STATUS_NAMES.get(code, str(code))
+        return NAMES.get(code, str(code))
 
 
 class Method:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .._save_grid import SaveGrid
 from .files import MEMBER_STATUSES, read_manifest, read_summary, task_paths
 from .spec import SweepError, require_extra
 
@@ -19,12 +20,10 @@ __all__ = ["open_sweep", "read_task", "saved_times", "status"]
 
 
 def saved_times(run: Mapping[str, Any]) -> np.ndarray:
-    """The saved times of a sweep's time grid (every ``save_every`` steps and the last)."""
-    n, every = int(run["n_steps"]), int(run["save_every"])
-    steps = list(range(0, n + 1, every))
-    if steps[-1] != n:
-        steps.append(n)
-    return float(run["t0"]) + np.asarray(steps, dtype=float) * float(run["dt"])
+    """The saved times of a sweep's time grid (the start, every ``save_every`` steps and the
+    last)."""
+    steps = SaveGrid(int(run["save_every"]), int(run["n_steps"])).saved_steps()
+    return float(run["t0"]) + steps.astype(float) * float(run["dt"])
 
 
 def _on_grid(arr: np.ndarray, n_on: int, n_grid: int) -> np.ndarray:
@@ -63,9 +62,9 @@ def read_task(
     if not isinstance(mark, dict) or mark.get("task") != task_id:
         raise SweepError(f"{path}: not the result file of task {task_id} (run the sweep again)")
     meta = run.meta
-    n, every = int(meta["n_steps"]), int(meta["save_every"])
-    n_grid = len(saved_times(meta))
-    off_grid = run.step % every != 0 and run.step != n  # the last good state of a failed run
+    grid = SaveGrid(int(meta["save_every"]), int(meta["n_steps"]))
+    n_grid = grid.rows(fresh=True)
+    off_grid = not grid.is_save(run.step)  # the last good state of a failed run
     n_on = len(run.ts) - int(off_grid)
     expect = {"y": (n_members, *layout["state_shape"])}
     expect |= {

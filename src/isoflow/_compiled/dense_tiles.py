@@ -1,0 +1,184 @@
+r"""IsoMP on :class:`~isoflow._compiled.dense.DenseBlas`: the fused specialization of its stage.
+
+The generic IsoMP stage (:mod:`isoflow._compiled.stages.isomp`) on the BLAS layout forms
+``P = B X``, ``T = P B`` (two full products) and then the update in a separate pass. This
+specialization computes the same map with about half of the second product and one pass after
+the products, measured in benchmarks 3, 10 and 12 (an iteration at ``n >= 256`` costs
+0.9-1.14 times two bare products): :math:`T = BXB` lies in ``V`` (``B`` is skew), so only its
+lower block triangle is computed, block row by block row, as
+:math:`T_{[r_0, r_1), [0, r_1)} = -P_{[r_0,r_1)}\, \overline{B}_{[0, r_1)}^{\,T}`
+(:func:`isoflow._compiled.dense.lower_blocks`); the rest (bracket, iterate, residual, mirrored
+into ``V``) is one cache-blocked pass over pairs of mirrored tiles. Every iterate and state
+stays in ``V`` to the last bit.
+
+``lay.blocks`` holds the ``(nb, 2)`` row ranges of the triangular product and ``lay.rowoff[i]``
+the offset of row ``i`` of the packed lower-block-triangular ``T`` in the scratch row
+``work[1]`` (:func:`isoflow._compiled.dense.packed_row_offsets`). Three scratch rows: ``B``,
+the packed ``T`` and ``conj(B)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .dense import _TILE, remove_trace
+
+__all__ = ["NWORK", "finish", "iterate"]
+
+#: Scratch rows per member.
+NWORK = 3
+#: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
+_FM = {"reassoc", "nsz", "contract"}
+
+
+@numba.njit(cache=True, inline="always")
+def _load_t(A, bi, ie, bj, je, buf):  # type: ignore[no-untyped-def]
+    """``buf[ii, jj] = A[bj + jj, bi + ii]``: the transposed tile, read row by row from ``A``."""
+    for j in range(bj, je):
+        for i in range(bi, ie):
+            buf[i - bi, j - bj] = A[j, i]
+
+
+@numba.njit(cache=True, inline="always")
+def _store_t(buf, A, bi, ie, bj):  # type: ignore[no-untyped-def]
+    """``A[bj + jj, bi + ii] = buf[ii, jj]``: the transposed tile written back row by row."""
+    for jj in range(_TILE):
+        dst = A[bj + jj, bi:ie]
+        for ii in range(ie - bi):
+            dst[ii] = buf[ii, jj]
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyped-def]
+    """``G = W + half (P + sigma(P)) - quarter T'`` on the lower triangle, mirrored into ``V``
+    (``T' = -T`` packed by rows, see :func:`iterate_blas`); returns ``|G - X|^2``.
+
+    Works on pairs of mirrored tiles ``(bi, bj)``, ``bj < bi``: the upper tile of ``P`` is read
+    row by row into a small transposed buffer, the mirrored tile of ``G`` is written back row
+    by row from a buffer; the inner loops run over contiguous row pieces (they vectorize).
+    Diagonal tiles are their own mirrors; on the diagonal ``T`` is projected onto ``V``.
+    """
+    n = W.shape[0]
+    PT = np.empty((_TILE, _TILE), dtype=P.dtype)
+    GT = np.empty((_TILE, _TILE), dtype=G.dtype)
+    rr = 0.0
+    for bi in range(0, n, _TILE):
+        ie = min(bi + _TILE, n)
+        for bj in range(0, bi, _TILE):
+            je = bj + _TILE
+            _load_t(P, bi, ie, bj, je, PT)
+            for ii in range(ie - bi):
+                i = bi + ii
+                p_row = P[i, bj:je]
+                w_row = W[i, bj:je]
+                t_row = Tp[rowoff[i] + bj : rowoff[i] + je]
+                x_row = X[i, bj:je]
+                g_row = G[i, bj:je]
+                pt_row = PT[ii]
+                gt_row = GT[ii]
+                for jj in range(_TILE):
+                    c = p_row[jj] + s * pt_row[jj].conjugate()
+                    g = w_row[jj] + half * c - quarter * t_row[jj]
+                    g_row[jj] = g
+                    gt_row[jj] = s * g.conjugate()
+                    d = g - x_row[jj]
+                    rr += 2.0 * (d.real * d.real + d.imag * d.imag)
+            _store_t(GT, G, bi, ie, bj)
+        for i in range(bi, ie):  # the diagonal tile
+            o = rowoff[i]
+            for j in range(bi, i):
+                c = P[i, j] + s * P[j, i].conjugate()
+                g = W[i, j] + half * c - quarter * Tp[o + j]
+                G[i, j] = g
+                G[j, i] = s * g.conjugate()
+                d = g - X[i, j]
+                rr += 2.0 * (d.real * d.real + d.imag * d.imag)
+            p = P[i, i]
+            t = -Tp[o + i]
+            g = W[i, i] + half * (p + s * p.conjugate()) + quarter * (0.5 * (t + s * t.conjugate()))
+            G[i, i] = g
+            d = g - X[i, i]
+            rr += d.real * d.real + d.imag * d.imag
+    return rr
+
+
+@numba.njit(cache=True)
+def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """One IsoMP iteration; ``aux`` receives ``P = B X`` (the bracket is formed from it when
+    needed)."""
+    n = lay.n
+    s = lay.s
+    half = 0.5 * hp
+    quarter = 0.25 * hp * hp
+    rowoff = lay.rowoff
+    Xm = X.reshape((n, n))
+    Bm = work[0].reshape((n, n))
+    P = aux.reshape((n, n))
+    f(Xm, Bm, *fargs)
+    np.dot(Bm, Xm, P)
+    # B[:, :r1] = -conj(B[:r1, :]).T (B is skew), so block row (r0, r1) of T = P B is
+    # -P[r0:r1] @ conj(B[:r1]).T: both operands contiguous, the transpose is BLAS's flag
+    if np.iscomplexobj(Bm):
+        Bc = work[2].reshape((n, n))
+        for i in range(n):
+            for j in range(n):
+                Bc[i, j] = Bm[i, j].conjugate()
+    else:
+        Bc = Bm
+    Tp = work[1]
+    rows = lay.blocks
+    for b in range(rows.shape[0]):
+        r0 = rows[b, 0]
+        r1 = rows[b, 1]
+        o = rowoff[r0]
+        np.dot(P[r0:r1], Bc[:r1].T, Tp[o : o + (r1 - r0) * r1].reshape((r1 - r0, r1)))
+    rr[0] = _combine(W.reshape((n, n)), Xm, P, Tp, rowoff, G.reshape((n, n)), s, half, quarter)
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = Pi_V(W + h (P + sigma(P)))`` with ``P = B X`` in ``aux``, computed on the lower
+    triangle and mirrored tile by tile; ``fin[0]`` whether ``Wn`` is finite.
+
+    The tile traversal is :func:`_combine`'s on purpose, with another body: passing the body
+    as a function argument would cost the inlining that lets the row loops vectorize.
+    """
+    n = lay.n
+    s = lay.s
+    h = hp
+    Wm = W.reshape((n, n))
+    P = aux.reshape((n, n))
+    Wo = Wn.reshape((n, n))
+    PT = np.empty((_TILE, _TILE), dtype=P.dtype)
+    VT = np.empty((_TILE, _TILE), dtype=P.dtype)
+    acc = 0.0
+    for bi in range(0, n, _TILE):
+        ie = min(bi + _TILE, n)
+        for bj in range(0, bi, _TILE):
+            je = bj + _TILE
+            _load_t(P, bi, ie, bj, je, PT)
+            for ii in range(ie - bi):
+                i = bi + ii
+                p_row = P[i, bj:je]
+                w_row = Wm[i, bj:je]
+                o_row = Wo[i, bj:je]
+                pt_row = PT[ii]
+                vt_row = VT[ii]
+                for jj in range(_TILE):
+                    v = w_row[jj] + h * (p_row[jj] + s * pt_row[jj].conjugate())
+                    o_row[jj] = v
+                    vt_row[jj] = s * v.conjugate()
+                    acc += abs(v.real) + abs(v.imag)
+            _store_t(VT, Wo, bi, ie, bj)
+        for i in range(bi, ie):  # the diagonal tile
+            for j in range(bi, i + 1):
+                v = Wm[i, j] + h * (P[i, j] + s * P[j, i].conjugate())
+                Wo[i, j] = v
+                Wo[j, i] = s * v.conjugate()
+                acc += abs(v.real) + abs(v.imag)
+    if lay.traceless:
+        remove_trace(Wn, n)
+    fin[0] = math.isfinite(acc)

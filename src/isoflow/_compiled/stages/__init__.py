@@ -1,0 +1,209 @@
+"""The compiled stages of the methods, and the registry that gives a method its stage.
+
+A *stage* is one method's fixed-point iteration and finish, written once against the layout
+blocks (:mod:`isoflow._compiled.blocks`) with the interface of the one driver
+(:mod:`isoflow._compiled.driver`)::
+
+    iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr)   # G = G(X), rr per lane
+    finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin)  # the new state, fin per lane
+    begin(f, fargs, lay, mp, sd, W, h)                          # optional explicit part
+
+``f, fargs`` are the kernel's field, ``lay`` the layout record, ``mp`` the method's parameters
+(a tuple, :attr:`CompiledStage.params`), ``sd`` the unit's step data ``(L, D)`` (e.g. noise
+increments; ``D = 0`` for most methods), ``h`` the (sub)step, ``work`` the scratch rows. A
+method joins the compiled paths by one call of :func:`register`; a layout that needs a fused
+evaluation of a stage for speed gets a named :class:`Specialization` (with the benchmark that
+justifies it). A stage runs on every layout that provides the blocks it :attr:`needs
+<CompiledStage.needs>`; compositions of the method (:class:`isoflow.Composition`) run it
+substep by substep.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from ...methods import IsoMP, SphericalMidpoint
+from .. import dense_tiles, spin_chain
+from ..dense import DenseBlas
+from ..layout import Layout
+from ..spin_chain import SpinChain
+from . import isomp, spherical_midpoint
+
+__all__ = [
+    "CompiledStage",
+    "Specialization",
+    "StageOnLayout",
+    "StepDataRequest",
+    "register",
+    "stage_for",
+]
+
+
+@dataclass(frozen=True)
+class Specialization:
+    """A fused evaluation of a stage on one layout, kept because a benchmark shows it pays.
+
+    Attributes
+    ----------
+    choose : callable
+        ``layout -> (iterate, finish)`` (e.g. the serial or threaded sweeps).
+    nwork : int
+        Scratch rows per unit.
+    why : str
+        The benchmark that justifies it.
+    """
+
+    choose: Callable[[Layout], tuple[Any, Any]]
+    nwork: int
+    why: str
+
+
+@dataclass(frozen=True)
+class StageOnLayout:
+    """A stage's functions on one layout (what the driver is given)."""
+
+    begin: Any
+    iterate: Any
+    finish: Any
+    nwork: int
+
+
+def _no_offsets(method: Any) -> int:
+    return 0
+
+
+def _no_params(method: Any, problem: Any) -> tuple[Any, ...]:
+    return ()
+
+
+@dataclass(frozen=True)
+class StepDataRequest:
+    """What a stage's step data is for: the steps ``k0 + 1 .. k0 + nsteps`` of the members
+    ``members`` (their indices in the run, flattened; ``-1`` for the padding lanes of the last
+    unit), with step ``h``."""
+
+    k0: int
+    nsteps: int
+    members: Any
+    h: float
+
+
+@dataclass(frozen=True)
+class CompiledStage:
+    """A method's compiled stage.
+
+    Attributes
+    ----------
+    name : str
+    iterate, finish : numba dispatchers
+        The stage, written against the blocks.
+    needs : frozenset of str
+        The blocks it calls (a layout without one of them gives no compiled path).
+    nwork : int
+        Scratch rows per unit.
+    offsets : callable
+        ``method -> int``: stage offsets kept for the extrapolated initial guess (``0``: the
+        solve starts from the state). The method state is then ``(h, D_1, D_2, ...)``, newest
+        first, as :class:`isoflow.IsoMP` keeps it.
+    params : callable
+        ``(method, problem) -> tuple``: the method's parameters as the stage reads them.
+    begin : numba dispatcher or None
+        An explicit part before each solve (a split step), or none.
+    step_data : callable or None
+        ``(method, problem, request) -> (nsteps, members, D)`` float array: what the stage
+        reads per step and member (``sd`` of the interface, e.g. noise increments; row ``i``
+        of the result is the member ``request.members[i]``), made by the time loop for each
+        chunk (:class:`StepDataRequest`). ``None``: the stage reads none (``D = 0``). It must
+        depend only on the method, the problem, the step and the member, never on how a run is
+        cut into chunks, so that a resumed or split run draws the same data.
+    specializations : dict
+        Layout record class -> :class:`Specialization`.
+    """
+
+    name: str
+    iterate: Any
+    finish: Any
+    needs: frozenset[str]
+    nwork: int
+    offsets: Callable[[Any], int] = _no_offsets
+    params: Callable[[Any, Any], tuple[Any, ...]] = _no_params
+    begin: Any = None
+    step_data: Callable[[Any, Any, StepDataRequest], Any] | None = None
+    specializations: dict[type, Specialization] = field(default_factory=dict)
+
+    def on(self, layout: Layout) -> StageOnLayout | None:
+        """The stage's functions on ``layout``, or ``None`` if it lacks a block."""
+        spec = self.specializations.get(type(layout.record))
+        if spec is not None:
+            it, fin = spec.choose(layout)
+            return StageOnLayout(self.begin, it, fin, spec.nwork)
+        if not self.needs <= layout.blocks:
+            return None
+        return StageOnLayout(self.begin, self.iterate, self.finish, self.nwork)
+
+
+#: Method class -> its compiled stage.
+_STAGES: dict[type, CompiledStage] = {}
+
+
+def register(method: type, stage: CompiledStage) -> None:
+    """Give the method class ``method`` (exactly that class) the compiled ``stage``."""
+    _STAGES[method] = stage
+
+
+def stage_for(method: Any) -> CompiledStage | None:
+    """The compiled stage of ``method`` (an instance), or ``None``."""
+    return _STAGES.get(type(method))
+
+
+def _isomp_offsets(method: IsoMP) -> int:
+    return method.extrapolation_order + 1 if method.initial_guess == "extrapolate" else 0
+
+
+def _smm_offsets(method: SphericalMidpoint) -> int:
+    return 1 if method.initial_guess == "extrapolate" else 0
+
+
+register(
+    IsoMP,
+    CompiledStage(
+        "IsoMP",
+        isomp.iterate,
+        isomp.finish,
+        frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
+        isomp.NWORK,
+        offsets=_isomp_offsets,
+        specializations={
+            DenseBlas: Specialization(
+                lambda layout: (dense_tiles.iterate, dense_tiles.finish),
+                dense_tiles.NWORK,
+                "benchmarks 3, 10, 12: the triangular product and one tile pass",
+            ),
+            SpinChain: Specialization(
+                spin_chain.isomp_sweeps,
+                1,
+                "benchmarks 4, 5: one fused memory sweep",
+            ),
+        },
+    ),
+)
+register(
+    SphericalMidpoint,
+    CompiledStage(
+        "spherical midpoint",
+        spherical_midpoint.iterate,
+        spherical_midpoint.finish,
+        frozenset({"spherical_point", "evaluate_B", "bracket", "stage_update1", "advance_state"}),
+        spherical_midpoint.NWORK,
+        offsets=_smm_offsets,
+        specializations={
+            SpinChain: Specialization(
+                spin_chain.spherical_sweeps,
+                1,
+                "benchmark 5: fused memory sweeps",
+            ),
+        },
+    ),
+)
