@@ -219,7 +219,8 @@ def test_every_benchmark_is_registered_once() -> None:
         benchmarks = suite.load()
     finally:
         sys.path.remove(str(ROOT / "benchmarks"))
-    assert list(benchmarks) == list(range(1, 15))
+    ids = list(benchmarks)
+    assert ids == sorted(set(ids)) and set(range(1, 15)) <= set(ids), ids  # later issues add more
     files = sorted(p.stem for p in (ROOT / "benchmarks").glob("bench_*.py"))
     assert sorted(b.source for b in benchmarks.values() if b.source != "design") == files
     for k, b in benchmarks.items():

@@ -99,6 +99,7 @@ def test_size_bounds_refuse_before_building(monkeypatch: pytest.MonkeyPatch) -> 
         BASE | {"model": "spin-chain", "params": {"N": 10**9}},
         BASE | {"model": "euler-sphere", "params": {"N": 100000}},
         BASE | {"model": "spin-lattice", "params": {"shape": [10**5, 10**5]}},
+        BASE | {"model": "mhd-sphere", "params": {"N": 4096}},
     ):
         with pytest.raises(ConfigError, match="must be <="):
             registry.build(cfg)
@@ -120,7 +121,7 @@ def test_list_parameters() -> None:
 def test_every_builtin_model_builds_with_its_defaults_and_checks_them() -> None:
     small = {
         "rigid-body": {"n": 3}, "brockett": {"n": 3}, "toda": {"n": 3}, "spin-chain": {"N": 4},
-        "euler-sphere": {"N": 4}, "spin-lattice": {"shape": [3, 3]},
+        "euler-sphere": {"N": 4}, "spin-lattice": {"shape": [3, 3]}, "mhd-sphere": {"N": 4},
     }  # fmt: skip
     for name, spec in registry.MODELS.items():
         cfg = {"model": name, "params": small.get(name, {}), "dt": 0.01, "n_steps": 2}
@@ -313,6 +314,18 @@ _INITIAL_CASES = {
         {"N": 6},
         {"seed": 3, "lmin": 2, "lmax": 4, "slope": -1.0, "rms": 2.0},
     ),
+    "mhd-sphere": (
+        {"N": 6},
+        {
+            "seed": 3,
+            "lmin": 2,
+            "lmax": 4,
+            "slope": -1.0,
+            "kinetic_energy": 0.1,
+            "magnetic_energy": 0.4,
+        },
+    ),
+    "heavy-top": ({"top": "kovalevskaya"}, {"M0": [0.1, 0.2, 0.3], "Gamma0": [0.0, 0.6, 0.8]}),
 }
 
 
@@ -366,7 +379,8 @@ def test_initial_parameters_change_only_the_initial_state(name: str) -> None:
 @pytest.mark.parametrize(
     ("name", "base", "key", "value"),
     [("brockett", {"n": 4}, "n", 5), ("euler-sphere", {"N": 6}, "omega", 1.0),
-     ("spin-lattice", {"shape": [3, 4]}, "J", 2.0), ("hyperbolic-vortices", {}, "config", 2)],
+     ("spin-lattice", {"shape": [3, 4]}, "J", 2.0), ("hyperbolic-vortices", {}, "config", 2),
+     ("mhd-sphere", {"N": 6}, "omega", 1.0), ("heavy-top", {}, "mgl", 2.0)],
 )  # fmt: skip
 def test_the_dynamics_check_can_fail(name: str, base: dict, key: str, value: object) -> None:
     spec = registry.MODELS[name]

@@ -632,8 +632,12 @@ def test_a_scheduler_address_that_is_not_a_scheduler_is_one_line(
          "grid": {"seed": [0, 1, 2], "scale": [0.5, 1.0]}, "members_per_task": 4},
         {"model": "toda", "params": {"n": 5}, "method": "isomp", "solver": "newton", "dt": 0.1,
          "t1": 5.0, "save_every": 10, "grid": {"seed": {"start": 0, "stop": 4}}},
+        {"model": "mhd-sphere", "params": {"N": 5, "lmax": 3}, "dt": 0.05, "n_steps": 40,
+         "save_every": 10, "grid": {"seed": [0, 1, 2]}, "members_per_task": 2},
+        {"model": "heavy-top", "params": {"top": "kovalevskaya"}, "dt": 0.01, "n_steps": 100,
+         "save_every": 25, "perturb": 1e-2, "grid": {"seed": {"start": 0, "stop": 3}}},
     ],
-    ids=["perturbed-rigid-body", "brockett", "toda"],
+    ids=["perturbed-rigid-body", "brockett", "toda", "mhd-sphere", "perturbed-heavy-top"],
 )  # fmt: skip
 def test_every_member_equals_a_serial_solve(client, tmp_path: Path, table: dict) -> None:
     spec = read_spec(table)

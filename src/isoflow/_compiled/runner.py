@@ -11,7 +11,9 @@ method's own code, :class:`~isoflow._stepping.PythonRunner`). A compiled path ex
   ``so(n)``, ``u(n)``, ``su(n)``, ``Sym(n)``, ``Herm(n)`` (:mod:`.dense`; ensembles of an
   elementwise kernel as SIMD lanes, :mod:`.lanes`), :math:`(\mathbb{R}^3,\times)^N` and
   :math:`(\mathbb{R}^3,\times_L)^N` (:mod:`.particles`; point vortices, :mod:`.vortices`; spin
-  chains, :mod:`.spin_chain`); single systems and ensembles (units over numba threads).
+  chains, :mod:`.spin_chain`), the semidirect products of ``so(n)``, ``u(n)``, ``su(n)`` and
+  the heavy top's :math:`\mathfrak{se}(3)` (:mod:`.pairs`); single systems and ensembles
+  (units over numba threads).
 """
 
 from __future__ import annotations
@@ -36,11 +38,12 @@ from . import driver
 from .dense import DenseBlas, dense_layout
 from .lanes import lanes_layout
 from .layout import Layout
+from .pairs import PairsBlas, pair_layout
 from .particles import particle_layout
 from .records import Plan, SolverConstants, no_step_data
 from .signatures import DriverTypes, compiled_driver, no_begin
 from .spin_chain import chain_layout
-from .stages import CompiledStage, StageOnLayout, stage_for
+from .stages import CompiledStage, StageOnLayout, StepDataRequest, stage_for
 from .vortices import vortex_layout
 
 __all__ = ["CompiledRunner", "compiled_runner", "layout_for"]
@@ -65,6 +68,7 @@ def layout_for(
         lambda: lanes_layout(problem, members) if anderson == 0 else None,
         lambda: dense_layout(problem, members),
         lambda: particle_layout(problem, members),
+        lambda: pair_layout(problem, members),
     ]
     for build in builders:
         layout = build()
@@ -140,6 +144,9 @@ class CompiledRunner(Runner):
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
         self.mp = stage.params(method, problem)
+        self.stage = stage
+        self.method = method
+        self.problem = problem
         self.solver = SolverConstants.of(method.solver)
         self.kmax = stage.offsets(method)
         K = max(self.kmax, 1)
@@ -174,7 +181,7 @@ class CompiledRunner(Runner):
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS (the BLAS
         threads in force: those of the run's thread plan, :mod:`isoflow.threads`)."""
-        if not isinstance(self.layout.record, DenseBlas):
+        if not isinstance(self.layout.record, (DenseBlas, PairsBlas)):
             return True
         from ..threads import blas_threads
 
@@ -271,7 +278,9 @@ class CompiledRunner(Runner):
         from numba's cache, once per process and signature:
         :func:`~isoflow._compiled.signatures.compiled_driver`)."""
         impl = self.impl
-        dt = DriverTypes(self.f, self.fargs, self.layout.record, self.mp, self.W.dtype)
+        dt = DriverTypes(
+            self.f, self.fargs, self.layout.record, self.mp, self.W.dtype, len(self.core)
+        )
         dt.compile_stage(self.begin, impl.iterate, impl.finish)
         par = self.parallel if parallel is None else parallel
         return compiled_driver(dt.driver_signature(args), par)
@@ -365,12 +374,30 @@ class CompiledRunner(Runner):
             None if units.stop is None else units.stop * L,
         )
         plan = Plan.of(self.h, nsteps, k0, grid, self.kmax, self.impl.begin is not None)
-        data = no_step_data(nsteps, len(range(*members.indices(self.U * L))))
+        data = self._step_data(k0, nsteps, members)
         return (
             self.layout.record, self.mp, self.impl.nwork, self.W[units], self.ring[units],
             self.head[units], self.nh[units], self.coefs, self.gammas, plan, data, rows,
             self.solver, self.rec[members],
         )  # fmt: skip
+
+    def _step_data(self, k0: int, nsteps: int, members: slice) -> Array:
+        """The stage's step data of the steps ``k0 + 1 ..`` for the units' ``members`` (their
+        lanes; padding lanes are member ``-1``), or none."""
+        idx = np.arange(self.U * self.layout.lanes)[members]
+        if self.stage.step_data is None:
+            return no_step_data(nsteps, idx.size)
+        idx = np.where(idx < self.M, idx, -1)
+        request = StepDataRequest(int(k0), int(nsteps), idx, self.h)
+        data = np.ascontiguousarray(
+            self.stage.step_data(self.method, self.problem, request), dtype=np.float64
+        )
+        if data.ndim != 3 or data.shape[:2] != (nsteps, idx.size):
+            raise IsoflowError(
+                f"the step data of {self.stage.name} has shape {data.shape}, not "
+                f"({nsteps}, {idx.size}, D)"
+            )
+        return data
 
     def _advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         buf = self._rows_buffer(out)

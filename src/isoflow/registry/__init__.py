@@ -13,7 +13,8 @@ A run configuration is a flat dictionary::
 Spellings (one per thing, lower case with hyphens):
 
 * **models**: the built-in ones in :data:`MODELS` (``rigid-body``, ``brockett``, ``toda``,
-  ``spin-chain``, ``hyperbolic-vortices``, ``euler-sphere``); a model registered by an installed
+  ``spin-chain``, ``hyperbolic-vortices``, ``spin-lattice``, ``euler-sphere``, ``mhd-sphere``,
+  ``heavy-top``); a model registered by an installed
   package under the entry-point group ``isoflow.models``; or your own factory named
   ``"package.module:function"`` (a function returning ``(problem, initial_state)``, its keyword
   arguments from ``params``).

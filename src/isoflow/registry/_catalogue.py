@@ -26,6 +26,7 @@ from ._params import ConfigError, Param
 
 __all__ = [
     "DENSE_MAX_N",
+    "MHD_MAX_N",
     "ENTRY_POINT_GROUP",
     "MODELS",
     "MODEL_ALIASES",
@@ -189,6 +190,9 @@ def _seed(help_: str = "seed of the random initial data") -> Param:
 
 #: Largest matrix size ``n`` of a dense model from the command line (a state of 32 MiB, real).
 DENSE_MAX_N = 2048
+#: Largest ``N`` of MHD on the sphere from the command line: two complex fields (32 MiB) and six
+#: ``N x N`` products an iteration (about 10 s an iteration on one core at this size).
+MHD_MAX_N = 1024
 
 #: The built-in models: name -> :class:`ModelSpec`.
 MODELS: dict[str, ModelSpec] = {
@@ -284,6 +288,51 @@ MODELS: dict[str, ModelSpec] = {
             "Zeitlin's quantized Euler equations on the (rotating) sphere, su(N)",
             builtin=True,
             initial=("seed", "lmin", "lmax", "slope", "rms"),
+        ),
+        ModelSpec(
+            "mhd-sphere",
+            "isoflow.models:mhd_sphere",
+            {
+                "N": _size("matrix size of su(N): degrees l <= N - 1", 128, 2, MHD_MAX_N),
+                "omega": Param(float, 0.0, "angular velocity of the sphere"),
+                "seed": _seed("seed of the random initial vorticity and current"),
+                "lmin": Param(int, 1, "lowest degree of the random initial data", low=1),
+                "lmax": Param(
+                    int, None, "highest degree of the random initial data (min(10, N-1))", low=1
+                ),
+                "slope": Param(
+                    float, None, "kinetic and magnetic spectra E_l ~ l^slope (white if unset)"
+                ),
+                "kinetic_energy": Param(float, 0.25, "initial kinetic energy", low=0.0),
+                "magnetic_energy": Param(float, 0.25, "initial magnetic energy", low=0.0),
+            },
+            "Zeitlin's magnetohydrodynamics on the (rotating) sphere, su(N) x| su(N)*",
+            builtin=True,
+            initial=("seed", "lmin", "lmax", "slope", "kinetic_energy", "magnetic_energy"),
+        ),
+        ModelSpec(
+            "heavy-top",
+            "isoflow.models:heavy_top",
+            {
+                "top": Param(
+                    str, "lagrange", "which top", choices=("lagrange", "kovalevskaya", "general")
+                ),
+                "inertia": Param(
+                    float,
+                    None,
+                    "principal moments of inertia I1, I2, I3 [kg m^2]",
+                    low=0.0,
+                    length=3,
+                ),
+                "mgl": Param(
+                    float, 1.0, "mass x gravity x distance of the centre of mass [N m]", low=0.0
+                ),
+                "M0": Param(float, None, "initial body angular momentum [kg m^2/s]", length=3),
+                "Gamma0": Param(float, None, "initial upward vertical in the body frame", length=3),
+            },
+            "heavy top (Lagrange, Kovalevskaya or general) on se(3)* = so(3) x| R^3",
+            builtin=True,
+            initial=("M0", "Gamma0"),
         ),
     )
 }

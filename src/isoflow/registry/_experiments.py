@@ -26,6 +26,7 @@ EXPERIMENTS: dict[str, str] = {
         "vortices-trajectories",
         "vortices-invariants",
         "euler-sphere",
+        "mhd-sphere",
         "work-precision",
     )
 }

@@ -35,6 +35,7 @@ __all__ = [
     "CompiledStage",
     "Specialization",
     "StageOnLayout",
+    "StepDataRequest",
     "register",
     "stage_for",
 ]
@@ -78,6 +79,18 @@ def _no_params(method: Any, problem: Any) -> tuple[Any, ...]:
 
 
 @dataclass(frozen=True)
+class StepDataRequest:
+    """What a stage's step data is for: the steps ``k0 + 1 .. k0 + nsteps`` of the members
+    ``members`` (their indices in the run, flattened; ``-1`` for the padding lanes of the last
+    unit), with step ``h``."""
+
+    k0: int
+    nsteps: int
+    members: Any
+    h: float
+
+
+@dataclass(frozen=True)
 class CompiledStage:
     """A method's compiled stage.
 
@@ -98,6 +111,13 @@ class CompiledStage:
         ``(method, problem) -> tuple``: the method's parameters as the stage reads them.
     begin : numba dispatcher or None
         An explicit part before each solve (a split step), or none.
+    step_data : callable or None
+        ``(method, problem, request) -> (nsteps, members, D)`` float array: what the stage
+        reads per step and member (``sd`` of the interface, e.g. noise increments; row ``i``
+        of the result is the member ``request.members[i]``), made by the time loop for each
+        chunk (:class:`StepDataRequest`). ``None``: the stage reads none (``D = 0``). It must
+        depend only on the method, the problem, the step and the member, never on how a run is
+        cut into chunks, so that a resumed or split run draws the same data.
     specializations : dict
         Layout record class -> :class:`Specialization`.
     """
@@ -110,6 +130,7 @@ class CompiledStage:
     offsets: Callable[[Any], int] = _no_offsets
     params: Callable[[Any, Any], tuple[Any, ...]] = _no_params
     begin: Any = None
+    step_data: Callable[[Any, Any, StepDataRequest], Any] | None = None
     specializations: dict[type, Specialization] = field(default_factory=dict)
 
     def on(self, layout: Layout) -> StageOnLayout | None:
