@@ -9,7 +9,7 @@ import pytest
 
 import isoflow as iso
 from isoflow import sphere
-from isoflow.models.qg_sphere import qg_operator, quantized_z2
+from isoflow.models._qg_sphere import qg_operator, quantized_z2
 
 
 @pytest.mark.parametrize(("N", "lamb", "kappa"), [(9, 30.0, 0.0), (32, 100.0, 2.0), (17, 0.0, 0.5)])
@@ -111,7 +111,7 @@ def test_zonal_wind_of_a_solid_body_rotation() -> None:
 
 
 def _zonal(P: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    from isoflow.models.qg_sphere import zonal_wind
+    from isoflow.models._qg_sphere import zonal_wind
 
     return zonal_wind(P, theta)
 

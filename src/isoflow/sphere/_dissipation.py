@@ -320,13 +320,13 @@ def band_forcing(
     N: int, lf: int, dl: int = 0, *, energy_rate: float = 1.0, seed: int = 0
 ) -> StochasticForcing:
     r"""White-in-time forcing of every mode with ``lf - dl <= l <= lf + dl``, injecting the
-    mean energy rate ``energy_rate`` (:math:`arepsilon`).
+    mean energy rate ``energy_rate`` (:math:`\varepsilon`).
 
     All modes of the band get the same amplitude :math:`\sigma`. In the coefficients of the
-    vorticity, :math:`d\omega_{lm} = \dots + \sigma\,deta_{lm}`, and with the energy
-    :math:`E = rac12\sum\omega_{lm}^2/(l(l+1))` Itô's formula gives the mean injection
-    :math:`arepsilon = rac12\sigma^2\sum_{	ext{band}} 1/(l(l+1))`, hence
-    :math:`\sigma = \sqrt{2arepsilon / \sum_{	ext{band}} 1/(l(l+1))}`.
+    vorticity, :math:`d\omega_{lm} = \dots + \sigma\,d\beta_{lm}`, and with the energy
+    :math:`E = \frac12\sum\omega_{lm}^2/(l(l+1))` Itô's formula gives the mean injection
+    :math:`\varepsilon = \frac12\sigma^2\sum_{\text{band}} 1/(l(l+1))`, hence
+    :math:`\sigma = \sqrt{2\varepsilon / \sum_{\text{band}} 1/(l(l+1))}`.
 
     Raises
     ------

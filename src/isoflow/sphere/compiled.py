@@ -50,6 +50,7 @@ __all__ = [
     "helmholtz_solve_batch",
     "laplacian_apply",
     "laplacian_apply_batch",
+    "mhd_field",
     "poisson_solve",
     "poisson_solve_batch",
     "qg_field",
@@ -208,13 +209,13 @@ def euler_field(W, out, inv_piv, mult, inv_hbar, shift):  # type: ignore[no-unty
 
 @numba.njit(cache=True)
 def euler_double_bracket_field(W, out, inv_piv, mult, inv_hbar, shift, hbar, alpha):  # type: ignore[no-untyped-def]
-    r"""The Euler field with selective decay: :math:`B = \Psi/\hbar - lpha[\Psi, W]` with the
-    relative stream matrix :math:`\Psi = P + \hbar\,\mathrm{diag}(	ext{shift})`,
+    r"""The Euler field with selective decay: :math:`B = \Psi/\hbar - \alpha[\Psi, W]` with the
+    relative stream matrix :math:`\Psi = P + \hbar\,\mathrm{diag}(\text{shift})`,
     :math:`\Delta_N P = W` (:func:`euler_field` for ``alpha = 0``).
 
-    :math:`\dot W = [B, W]` then adds :math:`-lpha[[\Psi, W], W]` to Zeitlin's flow: still
+    :math:`\dot W = [B, W]` then adds :math:`-\alpha[[\Psi, W], W]` to Zeitlin's flow: still
     isospectral (every Casimir kept), while the energy decreases at the rate
-    :math:`rac{4\pi}{N}lpha\|[\Psi, W]\|_F^2` (``docs/theory/forced.rst``). Two matrix
+    :math:`\frac{4\pi}{N}\alpha\|[\Psi, W]\|_F^2` (``docs/theory/forced.rst``). Two matrix
     products per evaluation (BLAS).
     """
     poisson_solve(W, out, inv_piv, mult)
@@ -225,6 +226,23 @@ def euler_double_bracket_field(W, out, inv_piv, mult, inv_hbar, shift, hbar, alp
     for a in range(N):
         for b in range(N):
             out[a, b] = out[a, b] * inv_hbar - alpha * C[a, b]
+
+
+@numba.njit(cache=True)
+def mhd_field(W, out, inv_piv, mult, diag, gamma, inv_hbar, shift):  # type: ignore[no-untyped-def]
+    r"""Zeitlin's MHD ``B = (P / hbar + diag(shift), J / hbar)`` on the pair ``W = (Theta, Q)``,
+    ``(2, N, N)``: :math:`\Delta_N P = Q` (:func:`euler_field` on the second field, the same
+    function and arithmetic as the Euler model) and the current :math:`J = \Delta_N\Theta`
+    (:func:`laplacian_apply`; the trace of a stage's :math:`\Theta` is in the kernel of
+    :math:`\Delta_N` and drops out). The ``f(W, out, *args)`` of
+    :func:`isoflow.models.mhd_sphere`'s :class:`~isoflow.CompiledB` kernel.
+    """
+    euler_field(W[1], out[0], inv_piv, mult, inv_hbar, shift)
+    laplacian_apply(W[0], out[1], diag, gamma)
+    N = W.shape[1]
+    for a in range(N):
+        for b in range(N):
+            out[1, a, b] *= inv_hbar
 
 
 @numba.njit(cache=True)

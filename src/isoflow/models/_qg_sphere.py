@@ -61,10 +61,10 @@ from ..sphere import (
     laplacian_coefficients,
     to_coefficients,
 )
-from ..sphere._operators import _as_matrices, check_N, factor_diagonals
+from ..sphere._operators import as_matrices, check_N, factor_diagonals
 from ._checks import require_memory
+from ._euler_sphere import coriolis_matrix, euler_sphere, initial_vorticity, real_parameter
 from ._forced import budget_invariants, sphere_split
-from .euler_sphere import _real_parameter, coriolis_matrix, euler_sphere, initial_vorticity
 
 __all__ = ["QGOperator", "qg_operator", "qg_sphere", "zonal_wind"]
 
@@ -113,7 +113,7 @@ class QGOperator:
         r""":math:`A^{-1} W` for matrices ``(*batch, N, N)`` (``O(N^2)`` each, compiled)."""
         from ..sphere.compiled import helmholtz_solve_batch
 
-        flat, batch, N = _as_matrices(W, "qg_operator.solve")
+        flat, batch, N = as_matrices(W, "qg_operator.solve")
         out = np.empty_like(flat)
         helmholtz_solve_batch(flat, out, self.inv_piv, self.mult, np.zeros(N, np.complex128))
         return out.reshape(*batch, N, N)
@@ -138,7 +138,7 @@ def qg_operator(N: int, lamb: float = 0.0, kappa: float = 0.0) -> QGOperator:
 
 
 def _nonnegative(v: Any, what: str) -> float:
-    x = _real_parameter(v, what, "qg_sphere")
+    x = real_parameter(v, what, "qg_sphere")
     if x < 0:
         raise ParameterError(f"qg_sphere: {what} must be >= 0, got {v!r}")
     return x
@@ -246,7 +246,7 @@ def qg_sphere(
     lamb_ = _nonnegative(lamb, "lamb")
     kappa = 0.0
     if deformation_radius is not None:
-        Ld = _real_parameter(deformation_radius, "deformation_radius", "qg_sphere")
+        Ld = real_parameter(deformation_radius, "deformation_radius", "qg_sphere")
         if Ld <= 0:
             raise ParameterError(f"qg_sphere: deformation_radius must be > 0, got {Ld!r}")
         kappa = 1.0 / Ld
@@ -259,7 +259,7 @@ def qg_sphere(
             )
         )  # fmt: skip
     require_memory(16.0 * N * N, 8.0, f"qg_sphere: N = {N}")
-    Om = _real_parameter(omega, "omega", "qg_sphere")
+    Om = real_parameter(omega, "omega", "qg_sphere")
     op = QGOperator(N, lamb_, kappa)
     alg = su(N)
     h = hbar(N)
