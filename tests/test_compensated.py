@@ -48,6 +48,11 @@ def _cases() -> dict[str, Callable[[], tuple[iso.IsospectralProblem, np.ndarray,
             lambda: iso.models.heisenberg_chain(N=30, initial="random", seed=1), "spin chain"
         ),
         "vortices": with_runner(lambda: iso.models.hyperbolic_vortices(), "point vortices"),
+        "dual pairs small": with_runner(
+            lambda: iso.models.mhd_sphere(N=6, seed=1), "dual pairs su(6) x| su(6)* (written"
+        ),
+        "dual pairs BLAS": with_runner(lambda: iso.models.mhd_sphere(N=24, seed=1), "(BLAS)"),
+        "se(3) pairs": with_runner(lambda: iso.models.heavy_top(), "se(3) pairs"),
     }
 
 
@@ -55,9 +60,10 @@ CASES = _cases()
 
 
 def _traceless(alg: iso.algebras.Algebra, A: np.ndarray) -> np.ndarray:
-    """``A`` without its trace part on ``su(n)`` (the initial states carry a trace at
-    rounding, which the first step removes); ``A`` itself elsewhere."""
-    return np.asarray(alg.project(A)) if getattr(alg, "traceless", False) else A
+    """``A`` without its trace part on ``su(n)`` and on pairs of ``su(n)`` fields (the initial
+    states carry a trace at rounding, which the first step removes); ``A`` itself elsewhere."""
+    base = getattr(alg, "base", alg)
+    return np.asarray(alg.project(A)) if getattr(base, "traceless", False) else A
 
 
 @pytest.mark.parametrize("name", list(CASES))
