@@ -281,22 +281,31 @@ class SphereFlow(NamedTuple):
 
 
 @numba.njit(cache=True, fastmath=_FM)
-def _symmetric_product(P, off, k, x, y):  # type: ignore[no-untyped-def]
+def _symmetric_product(P, off, k, xr, xi, yr, yi):  # type: ignore[no-untyped-def]
     """``y = M x`` for the symmetric ``k x k`` matrix ``M`` stored as its upper triangle, row
-    by row, at ``P[off:]`` (each entry read once, used for both of its positions)."""
+    by row, at ``P[off:]``, and a complex ``x`` given by its real and imaginary parts (each
+    entry of ``M`` read once, used for both of its positions and both parts: real loops that
+    vectorize)."""
     for i in range(k):
-        y[i] = 0.0
+        yr[i] = 0.0
+        yi[i] = 0.0
     o = off
     for i in range(k):
-        xi = x[i]
-        acc = P[o] * xi
-        o += 1
+        xri = xr[i]
+        xii = xi[i]
+        d = P[o]
+        accr = d * xri
+        acci = d * xii
+        base = o - i
         for j in range(i + 1, k):
-            mij = P[o + j - i - 1]
-            acc += mij * x[j]
-            y[j] += mij * xi
-        o += k - i - 1
-        y[i] += acc
+            mij = P[base + j]
+            accr += mij * xr[j]
+            acci += mij * xi[j]
+            yr[j] += mij * xri
+            yi[j] += mij * xii
+        o += k - i
+        yr[i] += accr
+        yi[i] += acci
 
 
 @numba.njit(cache=True)
@@ -305,16 +314,21 @@ def dissipate(W, data, offe, offo):  # type: ignore[no-untyped-def]
     folded matrices of :class:`isoflow.sphere.SphereDissipation` (``data``: one half step's).
 
     On diagonal ``m`` (entries ``(i + m, i)``, ``n = N - m`` of them): sums
-    :math:`a_i = x_i + x_{n-1-i}` and differences :math:`b_i = x_i - x_{n-1-i}`, their products
-    with the even and odd matrices, back; the diagonal ``-m`` is then the mirror
-    :math:`W_{i, i+m} = -\overline{W_{i+m, i}}` (exactly what the product would give).
+    :math:`a_i = x_i + x_{n-1-i}` and differences :math:`b_i = x_i - x_{n-1-i}` (real and
+    imaginary parts apart), their products with the even and odd matrices, back; the diagonal
+    ``-m`` is then the mirror :math:`W_{i, i+m} = -\overline{W_{i+m, i}}` (exactly what the
+    product would give).
     """
     N = W.shape[0]
     half = (N + 1) // 2
-    a = np.empty(half, dtype=W.dtype)
-    b = np.empty(half, dtype=W.dtype)
-    ya = np.empty(half, dtype=W.dtype)
-    yb = np.empty(half, dtype=W.dtype)
+    ar = np.empty(half)
+    ai = np.empty(half)
+    br = np.empty(half)
+    bi = np.empty(half)
+    yar = np.empty(half)
+    yai = np.empty(half)
+    ybr = np.empty(half)
+    ybi = np.empty(half)
     for m in range(N):
         n = N - m
         h2 = n // 2
@@ -322,17 +336,20 @@ def dissipate(W, data, offe, offo):  # type: ignore[no-untyped-def]
         for p in range(h2):
             x1 = W[p + m, p]
             x2 = W[n - 1 - p + m, n - 1 - p]
-            a[p] = x1 + x2
-            b[p] = x1 - x2
+            ar[p] = x1.real + x2.real
+            ai[p] = x1.imag + x2.imag
+            br[p] = x1.real - x2.real
+            bi[p] = x1.imag - x2.imag
         if odd:
-            a[h2] = W[h2 + m, h2]
-        _symmetric_product(data, offe[m], h2 + odd, a, ya)
-        _symmetric_product(data, offo[m], h2, b, yb)
+            ar[h2] = W[h2 + m, h2].real
+            ai[h2] = W[h2 + m, h2].imag
+        _symmetric_product(data, offe[m], h2 + odd, ar, ai, yar, yai)
+        _symmetric_product(data, offo[m], h2, br, bi, ybr, ybi)
         for p in range(h2):
-            W[p + m, p] = ya[p] + yb[p]
-            W[n - 1 - p + m, n - 1 - p] = ya[p] - yb[p]
+            W[p + m, p] = complex(yar[p] + ybr[p], yai[p] + ybi[p])
+            W[n - 1 - p + m, n - 1 - p] = complex(yar[p] - ybr[p], yai[p] - ybi[p])
         if odd:
-            W[h2 + m, h2] = ya[h2]
+            W[h2 + m, h2] = complex(yar[h2], yai[h2])
         if m:
             for i in range(n):
                 W[i, i + m] = -W[i + m, i].conjugate()
