@@ -71,6 +71,12 @@ def _composed() -> tuple[Any, Any]:
     return problem, _ensemble(y0, problem.algebra, 3)
 
 
+def _python_b(alg: Any, power: int) -> tuple[Any, Any]:
+    """``B = W^power`` as a Python function on ``alg`` (odd powers stay in ``sp(n)``)."""
+    problem = iso.IsospectralProblem(algebra=alg, B=lambda W: np.linalg.matrix_power(W, power))
+    return problem, alg.random(1, scale=0.5)
+
+
 def _chain() -> tuple[Any, Any]:
     return iso.models.heisenberg_chain(12, initial="random", seed=4)
 
@@ -95,7 +101,14 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
     "point vortices (sphere)": (_vortices, iso.IsoMP),
     "point vortices (sphere), spherical midpoint": (_vortices, iso.SphericalMidpoint),
     "point vortices (hyperbolic)": (lambda: iso.models.hyperbolic_vortices(1), iso.IsoMP),
+    "se(3) pairs (heavy top)": (lambda: iso.models.heavy_top(top="kovalevskaya"), iso.IsoMP),
+    "su(17) x| su(17)* BLAS pairs (MHD)": (
+        lambda: iso.models.mhd_sphere(N=17, lmax=4, seed=1),
+        iso.IsoMP,
+    ),
     "su(6) NumPy": (lambda: _euler(6, kernel=False), iso.IsoMP),
+    "sp(2) NumPy": (lambda: _python_b(iso.algebras.sp(2), 3), iso.IsoMP),
+    "gl(3) NumPy": (lambda: _python_b(iso.algebras.gl(3), 2), iso.IsoMP),
 }
 
 N_STEPS, SAVE_EVERY = 36, 2

@@ -552,6 +552,24 @@ def test_a_task_whose_members_all_failed_is_frozen_at_its_last_good_state(tmp_pa
     _assert_members_are_serial_runs(spec, d)
 
 
+def test_a_member_whose_compiled_b_raises_fails_alone(tmp_path) -> None:
+    """One task of three members; the middle one's ``CompiledB`` raises in the middle of the
+    run: it alone is ``failed`` (not the task an ``error``), the others finish."""
+    spec = read_spec({"model": "user_models:raising_toy", "dt": 0.05, "n_steps": 40,
+                      "save_every": 4, "initial": ["scale"],
+                      "members": [{"scale": 0.1}, {"scale": 0.8}, {"scale": 0.2}]})  # fmt: skip
+    (task,) = spec.tasks
+    d = _prepared(spec, tmp_path)
+    summary = run_task(spec, task.id, d)
+    assert summary["status"] == ["finished", "failed", "finished"]
+    assert summary["failed_step"][0] == summary["failed_step"][2] == -1
+    assert 0 < summary["failed_step"][1] < 40
+    ds = open_sweep(d)
+    assert ds.message.sel(member=1) == "B raised: ValueError: entry too large"
+    assert status(d)["errors"] == {}
+    _assert_members_are_serial_runs(spec, d)
+
+
 def test_a_sweep_task_file_points_at_its_sweep(finished, capsys) -> None:
     spec, d = finished
     h5 = task_paths(d, spec.tasks[0].id).h5

@@ -26,8 +26,8 @@ from ._params import ConfigError, Param
 
 __all__ = [
     "DENSE_MAX_N",
-    "MHD_MAX_N",
     "ENTRY_POINT_GROUP",
+    "MHD_MAX_N",
     "MODELS",
     "MODEL_ALIASES",
     "ModelSpec",
