@@ -46,6 +46,17 @@ def _component(run: Any, idx: tuple[int, ...]) -> str:
     return f"W[{', '.join(map(str, idx))}]"
 
 
+#: Diagnostics of forced and dissipative runs (:func:`isoflow.models.euler_sphere`,
+#: :func:`isoflow.models.qg_sphere`): rates, spectra and profiles, not invariants. A result
+#: file holding them gets a row of panels of its own (:func:`plot_run`).
+BUDGET_RATES = (
+    "energy_injection", "energy_dissipation", "enstrophy_injection", "enstrophy_dissipation",
+)  # fmt: skip
+SPECTRA = ("energy_spectrum", "enstrophy_spectrum", "energy_transfer")
+PROFILES = ("zonal_wind",)
+_DIAGNOSTICS = (*BUDGET_RATES, *SPECTRA, *PROFILES)
+
+
 def plot_run(run: Any) -> Figure:
     """Invariants and state components of a result file (:class:`isoflow.io.RunData`).
 
@@ -53,12 +64,27 @@ def plot_run(run: Any) -> Figure:
     has one; the problem's invariants' variation (or the distance to the space); up to six
     state components in time. Every curve is labelled; small variations are scaled by a power
     of ten named in the axis label.
+
+    A run of a forced or dissipative sphere model adds a row of diagnostics (each panel when
+    its series is in the file): the energy budget (injection and dissipation rates against
+    :math:`dE/dt` from the saved energy), the enstrophy budget's rates, the energy spectrum
+    at up to six saves, the energy transfer spectrum (the bracket's; first and last save)
+    and, for the quasi-geostrophic model, the zonal-mean wind against latitude over time.
     """
     ts, s = run.ts, run.series
     energy = "hamiltonian" in s or "lyapunov" in s
-    # c: Casimirs, e: energy (Hamiltonian or Lyapunov function), i: invariants, s: states
-    fig = new_figure(figsize=(10, 7))
-    axes = fig.subplot_mosaic("ce;is" if energy else "ci;ss", sharex=True)
+    extra = _diagnostic_panels(s)
+    # c: Casimirs, e: energy (Hamiltonian or Lyapunov function), i: invariants, s: states;
+    # the diagnostics row: b, z energy and enstrophy budgets, p spectra, t transfer, w wind
+    top = [["c", "e"], ["i", "s"]] if energy else [["c", "i"], ["s", "s"]]
+    rows = [[k for k in row for _ in range(3)] for row in top]  # six columns
+    for group in extra:
+        rows.append([k for k in group for _ in range(6 // len(group))])
+    fig = new_figure(figsize=(10, 7 + 3.5 * len(extra)))
+    axes = fig.subplot_mosaic(rows)  # type: ignore[arg-type]
+    for key in ("e", "i", "s", "b", "z"):
+        if key in axes:
+            axes[key].sharex(axes["c"])
     _casimir_panel(axes["c"], ts, s)
     if energy:
         _energy_panel(axes["e"], ts, s)
@@ -66,8 +92,97 @@ def plot_run(run: Any) -> Figure:
     _states_panel(axes["s"], run)
     axes["i"].set_xlabel("t")
     axes["s"].set_xlabel("t")
+    drawers = {"b": _budget_panel, "z": _enstrophy_panel, "p": _spectrum_panel,
+               "t": _transfer_panel, "w": _wind_panel}  # fmt: skip
+    for group in extra:
+        for key in group:
+            drawers[key](axes[key], ts, s)
     fig.suptitle(_title(run))
     return fig
+
+
+def _diagnostic_panels(s: dict[str, Any]) -> list[list[str]]:
+    """The keys of the diagnostics panels the series ``s`` fill, by row: the budgets, then
+    the spectra and the wind (no empty row)."""
+    has = {k.split("/", 1)[1] for k in s if k.startswith("invariants/")}
+    budgets = [key for key, names in (("b", {"energy_injection", "energy_dissipation"}),
+                                      ("z", {"enstrophy_injection", "enstrophy_dissipation"}))
+               if has & names]  # fmt: skip
+    profiles = [key for key, name in (("p", "energy_spectrum"), ("t", "energy_transfer"),
+                                      ("w", "zonal_wind"))
+                if name in has]  # fmt: skip
+    return [row for row in (budgets, profiles) if row]
+
+
+def _budget_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
+    """Energy injection and dissipation rates and :math:`dE/dt` of the saved energy: the
+    budget closes when ``injection - dissipation`` follows ``dE/dt``."""
+    _rates(ax, ts, s, "energy")
+    if "hamiltonian" in s and len(ts) >= 3:
+        E = np.real(s["hamiltonian"]).reshape(-1)
+        ax.plot(ts, np.gradient(E, ts), "k:", lw=1.2, label="dE/dt (saved E)")
+    ax.set_title("energy budget")
+    ax.legend(fontsize=7)
+
+
+def _enstrophy_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
+    """Enstrophy injection and dissipation rates (of the relative vorticity)."""
+    _rates(ax, ts, s, "enstrophy")
+    ax.set_title("enstrophy budget")
+    ax.legend(fontsize=7)
+
+
+def _rates(ax: Any, ts: Any, s: dict[str, Any], quantity: str) -> None:
+    """The injection, dissipation and net rates of ``quantity`` (``energy``, ``enstrophy``)."""
+    zero = np.zeros(len(ts))
+    inj = np.real(s.get(f"invariants/{quantity}_injection", zero)).reshape(-1)
+    dis = np.real(s.get(f"invariants/{quantity}_dissipation", zero)).reshape(-1)
+    ax.plot(ts, inj, lw=0.9, label="injection")
+    ax.plot(ts, dis, lw=0.9, label="dissipation")
+    ax.plot(ts, inj - dis, lw=0.9, color="k", label="injection - dissipation")
+    ax.set_xlabel("t")
+    ax.set_ylabel(f"{quantity} rate")
+
+
+def _save_indices(n: int, most: int = 6) -> list[int]:
+    """Up to ``most`` save indices spread from the first to the last of ``n``."""
+    return sorted({round(float(i)) for i in np.linspace(0, n - 1, min(n, most))})
+
+
+def _spectrum_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
+    """The saved energy spectrum at up to six saves (log-log)."""
+    from .sphere.figures import draw_energy_spectrum
+
+    E = np.real(s["invariants/energy_spectrum"])
+    draw_energy_spectrum(ax, {f"t = {ts[i]:.3g}": E[i] for i in _save_indices(len(ts))})
+    ax.set_title("energy spectrum")
+
+
+def _transfer_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
+    """The bracket's energy transfer per degree at the first and the last save."""
+    T = np.real(s["invariants/energy_transfer"])
+    ls = np.arange(1, T.shape[1] + 1)
+    for i in sorted({0, len(ts) - 1}):
+        ax.plot(ls, T[i], lw=0.9, marker=".", label=f"t = {ts[i]:.3g}")
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.set_xscale("log")
+    ax.set_xlabel("degree $l$")
+    ax.set_ylabel("$T_l$")
+    ax.set_title("energy transfer (sums to 0)")
+    ax.legend(fontsize=7)
+
+
+def _wind_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
+    """The zonal-mean eastward wind against latitude, one curve per save (up to six)."""
+    u = np.real(s["invariants/zonal_wind"])
+    lat = 90.0 - np.linspace(0.0, 180.0, u.shape[1])  # saved pole to pole in colatitude
+    for i in _save_indices(len(ts)):
+        ax.plot(u[i], lat, lw=0.9, label=f"t = {ts[i]:.3g}")
+    ax.axvline(0.0, color="k", lw=0.5)
+    ax.set_xlabel("zonal-mean wind $\\bar u$")
+    ax.set_ylabel("latitude (degrees)")
+    ax.set_title("zonal-mean wind")
+    ax.legend(fontsize=7)
 
 
 def _casimir_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
@@ -95,7 +210,7 @@ def _energy_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
 
 def _invariants_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
     """The variation of the problem's invariants, or else the distance to the space."""
-    names = [k for k in s if k.startswith("invariants/")]
+    names = [k for k in s if k.startswith("invariants/") and k.split("/", 1)[1] not in _DIAGNOSTICS]
     if names:
         cols, labels = [], []
         for k in names:

@@ -17,7 +17,9 @@ def add_parser(sub: Any) -> None:
             "Draw a result file: the variation of the Casimirs, of the Hamiltonian (or the "
             "Lyapunov function; no panel when the problem has neither), of the problem's "
             "invariants (or the distance to the space), and up to six state components that "
-            "move, against time. Writes PNG, PDF or SVG by the suffix of --out."
+            "move, against time; a forced or dissipative sphere run adds its energy and "
+            "enstrophy budgets, energy and transfer spectra and, for QG, the zonal-mean wind. "
+            "Writes PNG, PDF or SVG by the suffix of --out."
         ),
     )
     plot.add_argument("file", help="an isoflow result file (HDF5)")

@@ -1,0 +1,88 @@
+"""Budgets, spectra and the zonal wind of forced and dissipative runs in result files, and
+their panels in ``isoflow plot`` (issue 21, item 5): written per save, read back equal to the
+in-memory diagnostics, the energy budget closing from the file alone, the panels drawn."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+from isoflow import io, plotting
+
+BUDGETS = ("energy_injection", "energy_dissipation", "enstrophy_injection", "enstrophy_dissipation")
+SPECTRA = ("energy_spectrum", "enstrophy_spectrum", "energy_transfer")
+
+
+def _write(tmp_path: Path, model: str, **kwargs: object) -> tuple[Path, iso.Solution]:
+    """A forced, damped run of ``model`` written to a result file, and the same run in memory."""
+    N = 8
+    F = 0.3 * iso.algebras.su(N).random(seed=6)
+    build = getattr(iso.models, model)
+    prob, Q0 = build(N=N, seed=7, viscosity=0.02, drag=0.1, forcing=F, **kwargs)
+    path = tmp_path / f"{model}.h5"
+    opts = {"dt": 0.025, "n_steps": 160, "save_every": 8, "progress": False}
+    iso.solve(prob, iso.Strang(), Q0, writer=io.HDF5Writer(path), **opts)
+    return path, iso.solve(prob, iso.Strang(), Q0, **opts)
+
+
+@pytest.mark.parametrize(
+    ("model", "kwargs"),
+    [("euler_sphere", {}), ("qg_sphere", {"lamb": 20.0, "omega": 1.5})],
+    ids=["euler", "qg"],
+)
+def test_budgets_and_spectra_are_saved_per_save_and_read_back(
+    tmp_path: Path, model: str, kwargs: dict[str, float]
+) -> None:
+    path, sol = _write(tmp_path, model, **kwargs)
+    run = io.load(path)
+    n_saves, lmax = 21, 7
+    for name in BUDGETS:
+        got = np.asarray(run.series[f"invariants/{name}"])
+        assert got.shape == (n_saves,)
+        assert got.tobytes() == np.asarray(sol.diagnostics.invariants[name]).tobytes()
+    for name in SPECTRA:
+        assert np.asarray(run.series[f"invariants/{name}"]).shape == (n_saves, lmax)
+    transfer = np.asarray(run.series["invariants/energy_transfer"])
+    assert np.abs(transfer.sum(axis=1)).max() < 1e-12 * np.abs(transfer).max()
+    # the energy budget closes from the file alone (trapezoid rule over 20 saves: O(dt_save^2))
+    E = np.asarray(run.series["hamiltonian"])
+    rate = np.asarray(run.series["invariants/energy_injection"]) - np.asarray(
+        run.series["invariants/energy_dissipation"]
+    )
+    gained = float(np.trapezoid(rate, run.ts))
+    assert abs(float(E[-1] - E[0]) - gained) < 1e-2 * abs(gained)
+    if model == "qg_sphere":
+        u = np.asarray(run.series["invariants/zonal_wind"])
+        assert u.shape == (n_saves, 65)
+        assert u.tobytes() == np.asarray(sol.diagnostics.invariants["zonal_wind"]).tobytes()
+
+
+def test_plot_draws_the_budgets_spectra_and_zonal_wind(tmp_path: Path) -> None:
+    path, _ = _write(tmp_path, "qg_sphere", lamb=20.0, omega=1.5)
+    fig = plotting.plot_run(io.load(path))
+    axes = {ax.get_title(): ax for ax in fig.axes}
+    assert {"energy budget", "enstrophy budget", "energy spectrum", "zonal-mean wind"} <= set(axes)
+    assert "energy transfer (sums to 0)" in axes
+    # the budget panel draws injection, dissipation, their difference and dE/dt of the file
+    labels = [line.get_label() for line in axes["energy budget"].get_lines()]
+    assert labels == ["injection", "dissipation", "injection - dissipation", "dE/dt (saved E)"]
+    # spectra at six saves (first and last included), the wind at six saves over 65 latitudes
+    spectra = [ln for ln in axes["energy spectrum"].get_lines() if ln.get_label().startswith("t")]
+    assert [ln.get_label() for ln in spectra][::5] == ["t = 0", "t = 4"]
+    assert all(ln.get_xdata().size == 65 for ln in axes["zonal-mean wind"].get_lines()[:6])
+    # rates, spectra and profiles are not drawn as invariants
+    inv = [ln.get_label() for ln in axes["invariants variation"].get_lines()]
+    assert inv == ["enstrophy"]
+    plotting.save(fig, tmp_path / "q.png")
+    assert (tmp_path / "q.png").stat().st_size > 0
+
+
+def test_plot_of_a_run_without_diagnostics_has_no_diagnostics_row(tmp_path: Path) -> None:
+    prob, W0 = iso.models.euler_sphere(N=6, seed=1)
+    path = tmp_path / "ideal.h5"
+    iso.solve(prob, iso.IsoMP(), W0, dt=0.05, n_steps=8, writer=io.HDF5Writer(path), progress=False)
+    titles = [ax.get_title() for ax in plotting.plot_run(io.load(path)).axes]
+    assert len(titles) == 4 and "energy budget" not in titles
