@@ -20,6 +20,8 @@ SMALL = {
     "euler-sphere": {"N": 8, "T": 2.0},
     "mhd-sphere": {"quick": True, "N": 6, "T": 2.0},
     "work-precision": {"quick": True, "T": 2.0, "T_long": 10.0},
+    "forced-turbulence": {"N": 16, "T": 20.0},
+    "qg-jets": {"N": 12, "T": 10.0},
 }
 
 

@@ -102,3 +102,21 @@ def test_experiments_are_library_functions_with_parameters() -> None:
     assert abs(res.summary["observed_order"]["isomp"] - 2.0) < 0.1
     fig = iso.plotting.plot_experiment(res)
     assert len(fig.axes) == 1
+
+
+def test_forced_turbulence_numbers(results: Path) -> None:
+    s = _summary(results, "forced-turbulence")
+    eps = s["parameters"]["eps"]
+    # the realized injection is eps within its statistical error, the twin's budget closes
+    assert abs(s["realized_injection_rate"] - eps) <= 3 * s["realized_injection_sd"]
+    assert s["realized_injection_sd"] < 0.2 * eps  # an error bar that can fail the check
+    assert s["deterministic_budget_residual"] < 1e-3
+    assert s["spectrum_slope_small_scales"] < -3 < s["spectrum_slope_large_scales"]
+
+
+def test_qg_jets_numbers(results: Path) -> None:
+    s = _summary(results, "qg-jets")
+    ratios = list(s["wind_ratio_low_over_high"].values())
+    assert ratios == sorted(ratios) and ratios[-1] > 1.5
+    assert all(g >= 2.0 for g in s["zonal_share_growth"].values())
+    assert all(d["casimir_drift"] < 1e-11 for d in s["drifts"].values())

@@ -28,6 +28,8 @@ EXPERIMENTS: dict[str, str] = {
         "euler-sphere",
         "mhd-sphere",
         "work-precision",
+        "forced-turbulence",
+        "qg-jets",
     )
 }
 
