@@ -10,9 +10,16 @@ entries: in flops a small fraction of the two complex ``N x N`` products of each
 iterations. The iterations per step are reported too; the ratio per iteration is the cost of
 the split itself.
 
-Measured (N = 256, machine shared): 1.19, not met. The half step reads the matrix diagonal by
-diagonal, a cache miss per entry (about 20 ms a half step at N = 256, as long as a complex
-product); a blocked gather of the diagonals (row-major tiles) is the known next step.
+Measured (N = 128, 256, machine shared): 1.28, 1.20, not met. The cost is memory traffic,
+not arithmetic: a half step reads the folded per-diagonal matrices once, about ``N^3 / 12``
+doubles (11 MB at N = 256, 90 MB at 512, 0.7 GB at 1024), so one half step takes about as
+long as one complex product (4.0 ms against 3.1 ms at N = 256, 22 ms against 25 ms at 512),
+and a step has two of them against IsoMP's seven iterations of two products and a solve.
+Gathering the diagonals in cache-sized tiles instead of one strided entry at a time changed
+this by 0-8 % (the gather is a tenth of a half step). The known ways to 1.10: merge the two
+half steps of consecutive steps between saves (``S_{h/2} S_{h/2} = S_h``: half the traffic),
+or apply ``exp(-tau c(T_m))`` through the tridiagonal ``T_m`` of each diagonal (``O(N^2)``
+per application, no stored matrices) where ``tau c`` is moderate.
 Target: time per step, split / ideal, at most 1.10. Run alone:
 ``python benchmarks/bench_15_split.py [--quick]``.
 """

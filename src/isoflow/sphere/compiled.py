@@ -308,19 +308,59 @@ def _symmetric_product(P, off, k, xr, xi, yr, yi):  # type: ignore[no-untyped-de
         yi[i] += acci
 
 
+#: Side of the square tiles in which :func:`dissipate` moves the matrix to and from its
+#: diagonals (a tile of ``W`` and the window of the diagonal buffers it maps to stay in cache).
+_TILE = 32
+
+
+@numba.njit(cache=True)
+def _gather_diagonals(W, Dr, Di):  # type: ignore[no-untyped-def]
+    """``Dr[m, p] + i Di[m, p] = W[p + m, p]`` for the lower triangle (``m >= 0``), tile by tile:
+    the rows of a tile are read in order and its ``2T x T`` window of the buffers is hot."""
+    N = W.shape[0]
+    for a0 in range(0, N, _TILE):
+        a1 = min(a0 + _TILE, N)
+        for b0 in range(0, a1, _TILE):
+            for a in range(a0, a1):
+                for b in range(b0, min(b0 + _TILE, a + 1)):
+                    x = W[a, b]
+                    Dr[a - b, b] = x.real
+                    Di[a - b, b] = x.imag
+
+
+@numba.njit(cache=True)
+def _scatter_diagonals(W, Dr, Di):  # type: ignore[no-untyped-def]
+    """The inverse of :func:`_gather_diagonals`, and the mirror ``W[p, p + m] =
+    -conj(W[p + m, p])`` of every diagonal ``m > 0`` (skew-Hermitian), tile by tile."""
+    N = W.shape[0]
+    for a0 in range(0, N, _TILE):
+        a1 = min(a0 + _TILE, N)
+        for b0 in range(0, a1, _TILE):
+            for a in range(a0, a1):
+                for b in range(b0, min(b0 + _TILE, a + 1)):
+                    W[a, b] = complex(Dr[a - b, b], Di[a - b, b])
+            for b in range(b0, min(b0 + _TILE, a1)):  # the mirror tile, row by row
+                for a in range(max(a0, b + 1), a1):
+                    W[b, a] = complex(-Dr[a - b, b], Di[a - b, b])
+
+
 @numba.njit(cache=True)
 def dissipate(W, data, offe, offo):  # type: ignore[no-untyped-def]
     r"""``W = f(-\Delta_N) W`` in place for one ``(N, N)`` skew-Hermitian matrix, with the
     folded matrices of :class:`isoflow.sphere.SphereDissipation` (``data``: one half step's).
 
-    On diagonal ``m`` (entries ``(i + m, i)``, ``n = N - m`` of them): sums
-    :math:`a_i = x_i + x_{n-1-i}` and differences :math:`b_i = x_i - x_{n-1-i}` (real and
-    imaginary parts apart), their products with the even and odd matrices, back; the diagonal
-    ``-m`` is then the mirror :math:`W_{i, i+m} = -\overline{W_{i+m, i}}` (exactly what the
-    product would give).
+    The lower triangle is first moved to its diagonals (:func:`_gather_diagonals`, in tiles:
+    read diagonal by diagonal, the matrix costs a cache miss per entry). On diagonal ``m``
+    (``n = N - m`` entries): sums :math:`a_i = x_i + x_{n-1-i}` and differences
+    :math:`b_i = x_i - x_{n-1-i}` (real and imaginary parts apart), their products with the
+    even and odd matrices, back; the diagonals then return to the matrix with their mirrors
+    :math:`W_{i, i+m} = -\overline{W_{i+m, i}}` (exactly what the product would give).
     """
     N = W.shape[0]
     half = (N + 1) // 2
+    Dr = np.empty((N, N))
+    Di = np.empty((N, N))
+    _gather_diagonals(W, Dr, Di)
     ar = np.empty(half)
     ai = np.empty(half)
     br = np.empty(half)
@@ -333,26 +373,29 @@ def dissipate(W, data, offe, offo):  # type: ignore[no-untyped-def]
         n = N - m
         h2 = n // 2
         odd = n - 2 * h2
+        xr = Dr[m]
+        xi = Di[m]
         for p in range(h2):
-            x1 = W[p + m, p]
-            x2 = W[n - 1 - p + m, n - 1 - p]
-            ar[p] = x1.real + x2.real
-            ai[p] = x1.imag + x2.imag
-            br[p] = x1.real - x2.real
-            bi[p] = x1.imag - x2.imag
+            q = n - 1 - p
+            ar[p] = xr[p] + xr[q]
+            ai[p] = xi[p] + xi[q]
+            br[p] = xr[p] - xr[q]
+            bi[p] = xi[p] - xi[q]
         if odd:
-            ar[h2] = W[h2 + m, h2].real
-            ai[h2] = W[h2 + m, h2].imag
+            ar[h2] = xr[h2]
+            ai[h2] = xi[h2]
         _symmetric_product(data, offe[m], h2 + odd, ar, ai, yar, yai)
         _symmetric_product(data, offo[m], h2, br, bi, ybr, ybi)
         for p in range(h2):
-            W[p + m, p] = complex(yar[p] + ybr[p], yai[p] + ybi[p])
-            W[n - 1 - p + m, n - 1 - p] = complex(yar[p] - ybr[p], yai[p] - ybi[p])
+            q = n - 1 - p
+            xr[p] = yar[p] + ybr[p]
+            xi[p] = yai[p] + ybi[p]
+            xr[q] = yar[p] - ybr[p]
+            xi[q] = yai[p] - ybi[p]
         if odd:
-            W[h2 + m, h2] = complex(yar[h2], yai[h2])
-        if m:
-            for i in range(n):
-                W[i, i + m] = -W[i + m, i].conjugate()
+            xr[h2] = yar[h2]
+            xi[h2] = yai[h2]
+    _scatter_diagonals(W, Dr, Di)
 
 
 @provide_flow(SphereFlow)
