@@ -268,3 +268,35 @@ def test_a_time_dependent_forcing_is_second_order(compiled: bool) -> None:
 
     e1, e2 = error(20), error(40)
     assert 3.6 < e1 / e2 < 4.4
+
+
+def test_ornstein_uhlenbeck_mean_energy_tends_to_eps_over_two_alpha() -> None:
+    """Bracket off, drag only, white noise on every mode of su(4) (``l = 1..3``): each
+    coefficient is an Ornstein–Uhlenbeck process, and the split step adds its exact increment,
+    so the ensemble mean energy is :math:`\\frac{\\varepsilon}{2\\alpha}(1 - e^{-2\\alpha t})`
+    at every save for any step size, tending to :math:`\\varepsilon/(2\\alpha)`.
+
+    200 members (noise seed 11, member ``m`` keyed by ``(11, m)``), ``alpha = 0.5``,
+    ``eps = 0.3``, ``h = 0.2``, ``T = 8``: the mean at each of the 8 saves lies within 4
+    standard errors of the ensemble (each about 0.01), and the last standard error is below
+    5 % of the limit, so a wrong factor in the noise amplitude (e.g. ``sqrt 2``) fails by far.
+    """
+    n, members, alpha, eps = 4, 200, 0.5, 0.3
+    rates = degree_rates(n, viscosity=0.0, hyperviscosity=None, drag=alpha)
+    prob = iso.IsospectralProblem(
+        algebra=iso.algebras.su(n),
+        B=lambda W: np.zeros_like(W),
+        hamiltonian=iso.sphere.energy,
+        linear_part=SphereDissipation(n, rates),
+        forcing=iso.sphere.band_forcing(n, 2, 1, energy_rate=eps, seed=11),
+    )
+    W0 = np.zeros((members, n, n), dtype=complex)
+    sol = iso.solve(prob, iso.Strang(), W0, dt=0.2, n_steps=40, save_every=5, progress=False)
+    E = np.asarray(sol.diagnostics.hamiltonian)  # (saves, members)
+    mean = E.mean(axis=1)[1:]
+    sem = E.std(axis=1, ddof=1)[1:] / np.sqrt(members)
+    limit = eps / (2 * alpha)
+    expected = limit * (1 - np.exp(-2 * alpha * sol.ts[1:]))
+    assert np.all(np.abs(mean - expected) <= 4 * sem), (mean - expected) / sem
+    assert sem[-1] < 0.05 * limit
+    assert abs(mean[-1] - limit) <= 4 * sem[-1] + limit * np.exp(-2 * alpha * sol.ts[-1])
