@@ -40,7 +40,7 @@ def kill_when(path: Path, min_rows: int, proc: subprocess.Popen) -> int:
     """SIGKILL ``proc`` once the result file ``path`` holds ``min_rows`` states; return them."""
     from isoflow import io
 
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 600  # a guard against a hang, not a timing
     n = 0
     while time.monotonic() < deadline:
         if proc.poll() is not None:

@@ -183,8 +183,8 @@ def _register_toy_stage() -> None:
         blocks.stage_update1(lay, W, 0.5 * h, aux, G, X, rr)
 
     @numba.njit(cache=True)
-    def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin):  # type: ignore[no-untyped-def]
-        blocks.advance_state(lay, W, h, aux, Wn, fin)
+    def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: ignore[no-untyped-def]
+        blocks.advance_state(lay, W, h, aux, E, Wn, fin)
 
     needs = frozenset({"evaluate_B", "bracket", "stage_update1", "advance_state"})
     stages.register(ToyMidpoint, stages.CompiledStage("toy midpoint", iterate, finish, needs, 1))

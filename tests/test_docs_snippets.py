@@ -7,6 +7,9 @@ namespace (as a reader pastes them into one session), as ``__main__``, in a fres
 directory, with BLAS on one thread (``tests/conftest.py``); doctest output is compared with
 ``ELLIPSIS`` and ``NORMALIZE_WHITESPACE``. A failure names the file and the line.
 
+The ``toml`` blocks are run or sweep files: each is read as the command line reads it (a
+table with ``grid`` or ``members`` as a sweep file, any other as a run file) and must be valid.
+
 A block that is deliberately incomplete (names defined in the prose, a cluster to connect to)
 is marked as a fragment by a comment right before it: ``.. fragment`` in rst, ``<!-- fragment
 -->`` in markdown, optionally with a reason (``.. fragment: needs a SLURM cluster``). A fragment
@@ -21,6 +24,7 @@ import re
 import runpy
 import shutil
 import textwrap
+import tomllib
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +42,8 @@ _RST_FRAGMENT = re.compile(r"^\s*\.\. fragment\b")
 _MD_FENCE = re.compile(r"^(\s*)```\s*(python3?|py|pycon)\s*$")
 _MD_FRAGMENT = re.compile(r"^\s*<!--\s*fragment\b.*-->\s*$")
 _DOCTEST_FLAGS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
+_RST_TOML = re.compile(r"^(\s*)\.\. (?:code-block|code|sourcecode)::\s*toml\s*$")
+_MD_TOML = re.compile(r"^\s*```\s*toml\s*$")
 
 
 @dataclass(frozen=True)
@@ -132,6 +138,44 @@ def page_blocks(path: Path) -> list[Block]:
     rel = str(path.relative_to(ROOT))
     text = path.read_text(encoding="utf-8")
     return markdown_blocks(text, rel) if path.suffix == ".md" else rst_blocks(text, rel)
+
+
+def toml_blocks(path: Path) -> list[tuple[int, str]]:
+    """``(line, text)`` of each ``toml`` block of a documentation page (rst or markdown)."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    found = []
+    for i, line in enumerate(lines):
+        if path.suffix == ".md" and _MD_TOML.match(line):
+            end = next(j for j in range(i + 1, len(lines)) if lines[j].strip() == "```")
+            found.append((i + 2, textwrap.dedent("\n".join(lines[i + 1 : end]))))
+        elif path.suffix == ".rst" and _RST_TOML.match(line):
+            first, end = _indented_body(lines, i, _indent(line))
+            while first < end and (not lines[first].strip() or lines[first].strip()[0] == ":"):
+                first += 1  # the directive's options and the blank line after them
+            found.append((first + 1, textwrap.dedent("\n".join(lines[first:end]))))
+    return found
+
+
+def check_toml_block(text: str, where: str) -> None:
+    """Read a ``toml`` block as ``isoflow sweep`` (a table with ``grid`` or ``members``) or
+    ``isoflow run`` reads its file.
+
+    Raises
+    ------
+    SnippetError
+        ``where: what went wrong``.
+    """
+    from isoflow import registry
+    from isoflow.sweep import read_spec
+
+    try:
+        table = tomllib.loads(text)
+        if "grid" in table or "members" in table:
+            read_spec(table)
+        else:
+            registry.normalize_config(registry.config_from_toml(table)[0])
+    except Exception as exc:
+        raise SnippetError(f"{where}: {type(exc).__name__}: {exc}") from exc
 
 
 def _pages() -> list[Path]:
@@ -329,6 +373,36 @@ def test_documentation_page_runs(
         pytest.skip("no Python blocks")
     monkeypatch.chdir(tmp_path)
     run_page(blocks, tmp_path)
+
+
+def test_the_toml_collector_finds_run_and_sweep_files(tmp_path: Path) -> None:
+    page = tmp_path / "page.rst"
+    page.write_text(RST + '\n.. code-block:: toml\n\n   model = "rigid-body"\n   dt = 0.1\n')
+    assert toml_blocks(page) == [(29, 'model = "rigid-body"\ndt = 0.1')]
+    md = tmp_path / "page.md"
+    md.write_text(MARKDOWN + '```toml\nmodel = "toda"\n```\n')
+    assert toml_blocks(md) == [(16, 'model = "toda"')]
+    check_toml_block('model = "rigid-body"\ndt = 0.1\nn_steps = 10\n[params]\nn = 4', "a:1")
+    for text, message in [
+        ('model = "rigid-body"\ndt = 0.1\nn_steps = 10\ncolour = 1', "a:1: ConfigError: "),
+        ('model = "rigid-body"\ndt = 0.1\nn_steps = 10\n[grid]\nseed = []', "a:1: SweepError"),
+        ("model = ", "a:1: TOMLDecodeError"),
+    ]:
+        with pytest.raises(SnippetError) as err:
+            check_toml_block(text, "a:1")
+        assert str(err.value).startswith(message), str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("page", "line", "text"),
+    [
+        pytest.param(p, line, text, id=f"{p.relative_to(ROOT)}:{line}")
+        for p in _pages()
+        for line, text in toml_blocks(p)
+    ],
+)
+def test_documentation_toml_files_are_valid(page: Path, line: int, text: str) -> None:
+    check_toml_block(text, f"{page.relative_to(ROOT)}:{line}")
 
 
 def _docstring_modules() -> list[str]:

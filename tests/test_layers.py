@@ -26,7 +26,7 @@ ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 def _loaded_after(code: str) -> list[str]:
     probe = f"{code}\nimport sys, json\nprint(json.dumps(sorted(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
-                         check=True, timeout=120)  # fmt: skip
+                         check=True, timeout=600)  # fmt: skip
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -205,5 +205,5 @@ def test_no_package_is_callable_or_binds_a_submodule_name_lazily() -> None:
         "print(json.dumps(bad))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, timeout=120)  # fmt: skip
+                         check=True, timeout=600)  # fmt: skip
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []

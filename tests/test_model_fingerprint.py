@@ -200,6 +200,14 @@ def test_a_sweep_task_with_a_changed_model_is_refused(user_dir: Path) -> None:
     paths.h5.write_bytes(copies[len(copies) // 2])
     write_user_model(user_dir, "fp_sweep", factor="-2.0 * ")
     fresh_import("fp_sweep")
-    with pytest.raises(iso.ModelChangedError, match="B differs at the probe state"):
+    with pytest.raises(iso.ModelChangedError) as err:
         run_task(spec, task.id, user_dir / "sweep")
+    assert str(err.value) == (
+        f"{paths.h5}: the model changed since this task started (B differs at the probe state "
+        "by 5.0e-01 (relative); the source of module fp_sweep changed); resuming would mix two "
+        "models in one task: restore the model, or delete this file to run the task again "
+        "from its start with this one"
+    )  # a sweep has no force: isoflow run --resume refuses a task's file
     assert not paths.json.exists() and "the model changed" in paths.log.read_text()
+    paths.h5.unlink()  # as the message says
+    assert run_task(spec, task.id, user_dir / "sweep")["status"] == ["finished"]

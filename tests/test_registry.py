@@ -314,6 +314,10 @@ _INITIAL_CASES = {
         {"N": 6},
         {"seed": 3, "lmin": 2, "lmax": 4, "slope": -1.0, "rms": 2.0},
     ),
+    "qg-sphere": (
+        {"N": 6, "lamb": 2.0, "omega": 1.0},
+        {"seed": 3, "lmin": 2, "lmax": 4, "slope": -1.0, "rms": 2.0},
+    ),
     "mhd-sphere": (
         {"N": 6},
         {

@@ -71,6 +71,12 @@ def _composed() -> tuple[Any, Any]:
     return problem, _ensemble(y0, problem.algebra, 3)
 
 
+def _python_b(alg: Any, power: int) -> tuple[Any, Any]:
+    """``B = W^power`` as a Python function on ``alg`` (odd powers stay in ``sp(n)``)."""
+    problem = iso.IsospectralProblem(algebra=alg, B=lambda W: np.linalg.matrix_power(W, power))
+    return problem, alg.random(1, scale=0.5)
+
+
 def _chain() -> tuple[Any, Any]:
     return iso.models.heisenberg_chain(12, initial="random", seed=4)
 
@@ -95,7 +101,14 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
     "point vortices (sphere)": (_vortices, iso.IsoMP),
     "point vortices (sphere), spherical midpoint": (_vortices, iso.SphericalMidpoint),
     "point vortices (hyperbolic)": (lambda: iso.models.hyperbolic_vortices(1), iso.IsoMP),
+    "se(3) pairs (heavy top)": (lambda: iso.models.heavy_top(top="kovalevskaya"), iso.IsoMP),
+    "su(17) x| su(17)* BLAS pairs (MHD)": (
+        lambda: iso.models.mhd_sphere(N=17, lmax=4, seed=1),
+        iso.IsoMP,
+    ),
     "su(6) NumPy": (lambda: _euler(6, kernel=False), iso.IsoMP),
+    "sp(2) NumPy": (lambda: _python_b(iso.algebras.sp(2), 3), iso.IsoMP),
+    "gl(3) NumPy": (lambda: _python_b(iso.algebras.gl(3), 2), iso.IsoMP),
 }
 
 N_STEPS, SAVE_EVERY = 36, 2
@@ -219,7 +232,7 @@ def test_sigkill_of_an_su_n_run_then_resume_is_bit_for_bit(tmp_path: Path) -> No
          "--out", str(path)],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )  # fmt: skip
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + 600  # a guard against a hang, not a timing
     while not ready.exists() and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
     stalled = ready.exists()

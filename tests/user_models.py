@@ -40,6 +40,18 @@ def compiled_toy(n: int = 4, seed: int = 0):
     return problem, alg.random(seed=seed, scale=0.3)
 
 
+def raising_toy(scale: float = 0.1, limit: float = 1.4):
+    """A compiled ``B`` on so(4) that raises once an entry of ``W`` exceeds ``limit``
+    (``user_kernels.raises_when_large``): a member of scale 0.8 raises in the middle of a run
+    of 40 steps of 0.05, members of scale 0.1 and 0.2 never do."""
+    import user_kernels
+
+    C = 0.5 * np.add.outer(np.arange(1.0, 5.0), np.arange(1.0, 5.0))
+    alg = iso.algebras.so(4)
+    kernel = iso.CompiledB(user_kernels.raises_when_large, (C, float(limit)))
+    return iso.IsospectralProblem(algebra=alg, kernel=kernel), alg.random(23, scale=scale)
+
+
 def not_a_model(n: int = 3):
     """Returns the wrong thing."""
     return np.zeros((n, n))

@@ -22,6 +22,8 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 from . import algebras as algebras
+from . import noise as noise
+from . import splitting as splitting
 from ._errors import ConvergenceError as ConvergenceError
 from ._errors import DtypeError as DtypeError
 from ._errors import InvalidBError as InvalidBError
@@ -54,9 +56,14 @@ from .methods import IsoSyRK as IsoSyRK
 from .methods import Method as Method
 from .methods import SphericalMidpoint as SphericalMidpoint
 from .methods import StepResult as StepResult
+from .methods import Strang as Strang
 from .nonlinear import FixedPoint as FixedPoint
 from .nonlinear import Newton as Newton
 from .problems import IsospectralProblem as IsospectralProblem
+from .splitting import Forcing as Forcing
+from .splitting import LinearPart as LinearPart
+from .splitting import ModalLinearPart as ModalLinearPart
+from .splitting import StochasticForcing as StochasticForcing
 
 if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
     from . import experiments as experiments
@@ -107,13 +114,16 @@ __all__ = [
     "DtypeError",
     "ElementwiseLinear",
     "FixedPoint",
+    "Forcing",
     "InvalidBError",
     "IsoMP",
     "IsoSyRK",
     "IsoflowError",
     "IsospectralProblem",
     "Kernel",
+    "LinearPart",
     "Method",
+    "ModalLinearPart",
     "ModelChangedError",
     "Newton",
     "NonFiniteError",
@@ -129,6 +139,8 @@ __all__ = [
     "SpinNeighbourSum",
     "StepResult",
     "StepSizeError",
+    "StochasticForcing",
+    "Strang",
     "TimeSpanError",
     "UnsupportedAlgebraError",
     "__version__",
@@ -136,11 +148,13 @@ __all__ = [
     "experiments",
     "io",
     "models",
+    "noise",
     "plotting",
     "reference_solution",
     "registry",
     "solve",
     "sphere",
+    "splitting",
     "step",
     "sweep",
     "threads",

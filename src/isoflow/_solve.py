@@ -26,8 +26,10 @@ from ._solution import RUN_FAILED, RUN_FINISHED, RUN_INTERRUPTED, RunState, Solu
 from ._time_loop import open_run, run, run_threads
 from ._writers import StreamWriter
 from .diagnostics import DiagnosticsAccumulator
-from .methods import Method
+from .methods import Composition, Method, Strang
+from .methods._base import StepDataRequest
 from .problems import IsospectralProblem
+from .splitting import has_split_part
 from .threads import ThreadRequest
 
 __all__ = [
@@ -145,6 +147,39 @@ def _check_objects(problem: Any, method: Any, writer: Any = None) -> None:
             f"writer must be a stream writer (open/append/checkpoint/close), got "
             f"{type(writer).__name__}{hint}"
         )
+    _check_split(problem, method)
+
+
+def _splits(method: Method) -> bool:
+    """Whether ``method`` integrates a problem's linear part and forcing (a split method, or
+    a composition of one)."""
+    if isinstance(method, Composition):
+        return _splits(method.base)
+    return isinstance(method, Strang)
+
+
+def _check_split(problem: IsospectralProblem, method: Method) -> None:
+    """A problem with a linear part or a forcing needs a split method.
+
+    Raises
+    ------
+    ParameterError
+        The method would integrate ``[B(W), W]`` alone, dropping the rest of the flow.
+    """
+    if has_split_part(problem) and not _splits(method):
+        what = " and ".join(
+            w
+            for w, there in (
+                ("a linear part", problem.linear_part is not None),
+                ("a forcing", bool(problem.forcing)),
+            )
+            if there
+        )
+        raise ParameterError(
+            f"the problem has {what}, which {method.name} does not integrate: solve it with "
+            f"the split method iso.Strang({type(method).__name__}(...)) "
+            "(or iso.Strang() for IsoMP)"
+        )
 
 
 def _check_state(
@@ -203,7 +238,13 @@ def step(
     if h == 0:
         raise StepSizeError("h must be finite and nonzero, got 0.0")
     W = _check_state(problem, y, "state") if validate else np.asarray(y)
-    res = method.step(problem, W, h, method.init(problem, W, h))
+    kw: dict[str, Any] = {}
+    if method.reads_step_data:  # the step from t = 0 of every member
+        batch = problem.algebra.batch_shape(W)
+        members = np.arange(int(np.prod(batch, dtype=np.int64)))
+        rows = np.asarray(method.step_data(problem, StepDataRequest(0, 1, members, h)))[0]
+        kw["data"] = rows.reshape(*batch, rows.shape[-1])
+    res = method.step(problem, W, h, method.init(problem, W, h), **kw)
     if not res.success or not np.all(np.isfinite(res.y)):
         raise step_exception(method.name, res, 0, 0.0)
     return (res.y, res) if return_info else res.y

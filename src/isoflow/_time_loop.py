@@ -90,10 +90,13 @@ def _settle_threads(pools: ThreadPools, threads: ThreadRequest, runner: Runner) 
     return {"cores": plan.cores, "numba": plan.numba if runner.parallel else 1, "blas": plan.blas}
 
 
-def runner_for(problem: IsospectralProblem, method: Method, state: RunState, dt: float) -> Runner:
+def runner_for(
+    problem: IsospectralProblem, method: Method, state: RunState, dt: float, t0: float = 0.0
+) -> Runner:
     """The compiled runner of the run when it has a compiled path, else the NumPy one."""
     kw: dict[str, Any] = {
         "method_state": state.method_state, "k": state.step, "failures": state.failures,
+        "t0": t0,
     }  # fmt: skip
     if problem.kernel is not None:
         from ._compiled import compiled_runner
@@ -239,7 +242,7 @@ def open_run(
     if accumulator is None:
         accumulator = DiagnosticsAccumulator(problem, keep_series=memory)
         accumulator.set_first_state(W)
-    runner = runner_for(problem, method, start, dt)
+    runner = runner_for(problem, method, start, dt, t0)
     request, pools = threads
     used = _settle_threads(pools, request, runner)
     series = diagnostics or not memory

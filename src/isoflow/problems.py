@@ -2,16 +2,17 @@ r"""Isospectral and Lie–Poisson problems :math:`\dot W = [B(W), W]` on a space
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ._errors import InvalidBError
+from ._errors import InvalidBError, ParameterError
 from .algebras import Algebra
 from .kernels import Kernel
+from .splitting import Forcing, LinearPart, StochasticForcing
 
 __all__ = ["IsospectralProblem"]
 
@@ -61,6 +62,15 @@ class IsospectralProblem:
         compiled code wherever the method and solver have a compiled path (same answer and
         iteration counts as the NumPy path to rounding). When both ``B`` and ``kernel`` are
         given they must agree (checked at the initial state when a run starts).
+    linear_part : LinearPart or None
+        A linear part ``L`` of the flow, :math:`\dot W = [B(W), W] + L W + F`, diagonal in an
+        orthonormal basis (dissipation: viscosity, drag; :mod:`isoflow.splitting`). A problem
+        with a linear part or a forcing is integrated by a split method,
+        :class:`~isoflow.Strang`.
+    forcing : Forcing, StochasticForcing or a sequence of them
+        Forcings added to the flow (:class:`~isoflow.Forcing`: deterministic, steady or with
+        time-dependent amplitudes; :class:`~isoflow.StochasticForcing`: white noise on modes
+        of ``linear_part``). Stored as a tuple.
     """
 
     B: Callable[[Array], Array] = None  # type: ignore[assignment]
@@ -73,6 +83,8 @@ class IsospectralProblem:
     name: str = "isospectral problem"
     parameters: Mapping[str, Any] = field(default_factory=dict)
     kernel: Kernel | None = None
+    linear_part: LinearPart | None = None
+    forcing: Forcing | StochasticForcing | Sequence[Forcing | StochasticForcing] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.algebra, Algebra):
@@ -93,6 +105,38 @@ class IsospectralProblem:
             object.__setattr__(self, "B", self.kernel.python_B(self.algebra))
         if not callable(self.B):
             raise TypeError(f"B must be callable, got {type(self.B).__name__}")
+        self._check_split_parts()
+
+    def _check_split_parts(self) -> None:
+        """Check the linear part and the forcings against the space (typed one-line errors)."""
+        if self.linear_part is not None:
+            if not isinstance(self.linear_part, LinearPart):
+                raise ParameterError(
+                    "linear_part must be an isoflow LinearPart (iso.ModalLinearPart, "
+                    f"iso.sphere.SphereDissipation) or None, got {self.linear_part!r}"
+                )
+            self.linear_part.check(self.algebra)
+        terms: Any = self.forcing
+        if isinstance(terms, (Forcing, StochasticForcing)):
+            terms = (terms,)
+        elif terms is None:
+            terms = ()
+        elif not isinstance(terms, (tuple, list)):
+            raise ParameterError(
+                "forcing must be an iso.Forcing, an iso.StochasticForcing or a sequence of "
+                f"them, got {type(terms).__name__}"
+            )
+        terms = tuple(terms)
+        for f in terms:
+            if isinstance(f, Forcing):
+                f.patterns(self.algebra)
+            elif isinstance(f, StochasticForcing):
+                f.checked(self.linear_part)
+            else:
+                raise ParameterError(
+                    f"forcing terms must be iso.Forcing or iso.StochasticForcing, got {f!r}"
+                )
+        object.__setattr__(self, "forcing", terms)
 
     # ---- evaluation ---------------------------------------------------------------------
     def evaluate_B(self, W: Array) -> Array:

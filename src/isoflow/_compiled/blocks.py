@@ -27,9 +27,11 @@ The blocks (a layout provides those its stages need; the stage registry checks t
     :math:`G = \Pi(W + a C + b T)` onto the stage space; ``rr[q] = |G - X|^2`` per lane.
 ``stage_update1(lay, W, a, C, G, X, rr)``
     The same without ``T``: :math:`G = \Pi(W + a C)`.
-``advance_state(lay, W, h, C, Wn, fin)``
+``advance_state(lay, W, h, C, E, Wn, fin)``
     :math:`W_n = \Pi_V(W + h C)` (exact mirrors stay exact); ``fin[q]`` whether lane ``q`` is
-    finite.
+    finite. With a compensation ``E`` (a buffer of the state's size; size 0: none) the sum is
+    compensated, :math:`W_n + E' = W + (hC + E)` exactly up to the rounding of ``hC + E``
+    (:func:`isoflow._compiled.flat.two_sum`), and ``E`` is overwritten by ``E'``.
 ``spherical_point(lay, W, M, mid)``
     The spherical midpoint's point ``m_i = sqrt(|w_i| |2 M_i - w_i|) M_i / |M_i|`` per
     particle (particle layouts on :math:`(\mathbb{R}^3, \times)` only).
@@ -162,8 +164,9 @@ def stage_update1(lay: Any, W: Any, a: Any, C: Any, G: Any, X: Any, rr: Any) -> 
 
 
 @_block
-def advance_state(lay: Any, W: Any, h: Any, C: Any, Wn: Any, fin: Any) -> None:
-    """``Wn = Pi_V(W + h C)``; ``fin[q]`` whether lane ``q`` is finite."""
+def advance_state(lay: Any, W: Any, h: Any, C: Any, E: Any, Wn: Any, fin: Any) -> None:
+    """``Wn = Pi_V(W + h C)`` (compensated by ``E`` unless it is empty); ``fin[q]`` whether
+    lane ``q`` is finite."""
     raise _stub("advance_state")
 
 

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from ..algebras import Hermitian, SpecialOrthogonal, Symmetric, Unitary
 from ..kernels import ElementwiseLinear
 from . import blocks
+from .flat import two_sum
 from .layout import Layout, member_layout
 
 __all__ = [
@@ -49,6 +50,7 @@ __all__ = [
     "packed_row_offsets",
     "product",
     "remove_trace",
+    "remove_trace_compensated",
     "sigma_sign",
 ]
 
@@ -265,16 +267,40 @@ def remove_trace(A, n):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _advance_state(lay, W, h, C, Wn, fin):  # type: ignore[no-untyped-def]
-    """``Wn = Pi_V(W + h C)``: ``W`` and ``C`` are exact mirrors, hence so is ``W + h C``; only
-    the trace of ``su(n)`` is left to remove."""
+def remove_trace_compensated(A, E, n):  # type: ignore[no-untyped-def]
+    """:func:`remove_trace` with the rounding of each diagonal entry added to ``E`` (exact:
+    the traceless part of ``A + E`` does not change)."""
+    tr = A[0]
+    for i in range(1, n):
+        tr += A[i * (n + 1)]
+    tr = tr / n
+    for i in range(n):
+        k = i * (n + 1)
+        v, e = two_sum(A[k], -tr)
+        A[k] = v
+        E[k] += e
+
+
+@numba.njit(cache=True, inline="always")
+def _advance_state(lay, W, h, C, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = Pi_V(W + h C)``: ``W`` and ``C`` are exact mirrors, hence so is ``W + h C`` (and
+    the compensation ``E``, entry by entry the same operations); only the trace of ``su(n)``
+    is left to remove."""
     acc = 0.0
-    for i in range(W.shape[0]):
-        v = W[i] + h * C[i]
-        Wn[i] = v
-        acc += abs(v.real) + abs(v.imag)
-    if lay.traceless:
-        remove_trace(Wn, lay.n)
+    if E.shape[0] == 0:
+        for i in range(W.shape[0]):
+            v = W[i] + h * C[i]
+            Wn[i] = v
+            acc += abs(v.real) + abs(v.imag)
+        if lay.traceless:
+            remove_trace(Wn, lay.n)
+    else:
+        for i in range(W.shape[0]):
+            v, E[i] = two_sum(W[i], h * C[i] + E[i])
+            Wn[i] = v
+            acc += abs(v.real) + abs(v.imag)
+        if lay.traceless:
+            remove_trace_compensated(Wn, E, lay.n)
     fin[0] = math.isfinite(acc)
 
 

@@ -37,8 +37,9 @@ import math
 import numba
 import numpy as np
 
-from .dense import _TILE, remove_trace
+from .dense import _TILE, remove_trace, remove_trace_compensated
 from .dense_tiles import _load_t, _store_t
+from .flat import two_sum
 
 __all__ = ["NWORK", "finish", "iterate"]
 
@@ -213,19 +214,24 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[
     )  # fmt: skip
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore[no-untyped-def]
+@numba.njit(cache=True, fastmath={"nsz", "contract"})
+def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = Pi_V(W + h (P + sigma(P)))`` from the planes of ``P`` in ``aux``, on the lower
-    triangle and mirrored tile by tile; ``fin[0]`` whether ``Wn`` is finite."""
+    triangle and mirrored tile by tile, compensated by ``E`` (mirrored the same way) unless it
+    is empty, as :func:`isoflow._compiled.dense_tiles.finish`; ``fin[0]`` whether ``Wn`` is
+    finite. No reassociation here: it would simplify the compensation's exact error away."""
     n = lay.n
     s = lay.s
     h = hp
     Wm = W.reshape((n, n))
     Wo = Wn.reshape((n, n))
+    compensated = E.shape[0] != 0
+    Em = E.reshape((n, n)) if compensated else E.reshape((0, 0))
     Pr, Pi = _planes(aux, n)
     PrT = np.empty((_TILE, _TILE))
     PiT = np.empty((_TILE, _TILE))
     VT = np.empty((_TILE, _TILE), dtype=W.dtype)
+    ET = np.empty((_TILE, _TILE), dtype=W.dtype)
     acc = 0.0
     for bi in range(0, n, _TILE):
         ie = min(bi + _TILE, n)
@@ -242,21 +248,45 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore
                 prt_row = PrT[ii]
                 pit_row = PiT[ii]
                 vt_row = VT[ii]
-                for jj in range(_TILE):
-                    w = w_row[jj]
-                    vr = w.real + h * (pr_row[jj] + s * prt_row[jj])
-                    vi = w.imag + h * (pi_row[jj] - s * pit_row[jj])
-                    o_row[jj] = complex(vr, vi)
-                    vt_row[jj] = complex(s * vr, -s * vi)
-                    acc += abs(vr) + abs(vi)
+                if compensated:
+                    e_row = Em[i, bj:je]
+                    et_row = ET[ii]
+                    for jj in range(_TILE):
+                        d = complex(
+                            h * (pr_row[jj] + s * prt_row[jj]), h * (pi_row[jj] - s * pit_row[jj])
+                        )
+                        v, e = two_sum(w_row[jj], d + e_row[jj])
+                        o_row[jj] = v
+                        e_row[jj] = e
+                        vt_row[jj] = s * v.conjugate()
+                        et_row[jj] = s * e.conjugate()
+                        acc += abs(v.real) + abs(v.imag)
+                else:
+                    for jj in range(_TILE):
+                        w = w_row[jj]
+                        vr = w.real + h * (pr_row[jj] + s * prt_row[jj])
+                        vi = w.imag + h * (pi_row[jj] - s * pit_row[jj])
+                        o_row[jj] = complex(vr, vi)
+                        vt_row[jj] = complex(s * vr, -s * vi)
+                        acc += abs(vr) + abs(vi)
             _store_t(VT, Wo, bi, ie, bj)
+            if compensated:
+                _store_t(ET, Em, bi, ie, bj)
         for i in range(bi, ie):  # the diagonal tile
             for j in range(bi, i + 1):
-                vr = Wm[i, j].real + h * (Pr[i, j] + s * Pr[j, i])
-                vi = Wm[i, j].imag + h * (Pi[i, j] - s * Pi[j, i])
-                Wo[i, j] = complex(vr, vi)
-                Wo[j, i] = complex(s * vr, -s * vi)
-                acc += abs(vr) + abs(vi)
+                d = complex(h * (Pr[i, j] + s * Pr[j, i]), h * (Pi[i, j] - s * Pi[j, i]))
+                if compensated:
+                    v, e = two_sum(Wm[i, j], d + Em[i, j])
+                    Em[i, j] = e
+                    Em[j, i] = s * e.conjugate()
+                else:
+                    v = Wm[i, j] + d
+                Wo[i, j] = v
+                Wo[j, i] = s * v.conjugate()
+                acc += abs(v.real) + abs(v.imag)
     if lay.traceless:
-        remove_trace(Wn, n)
+        if compensated:
+            remove_trace_compensated(Wn, E, n)
+        else:
+            remove_trace(Wn, n)
     fin[0] = math.isfinite(acc)

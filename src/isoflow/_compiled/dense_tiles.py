@@ -24,7 +24,8 @@ import math
 import numba
 import numpy as np
 
-from .dense import _TILE, remove_trace
+from .dense import _TILE, remove_trace, remove_trace_compensated
+from .flat import two_sum
 
 __all__ = ["NWORK", "finish", "iterate"]
 
@@ -138,13 +139,16 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[
     rr[0] = _combine(W.reshape((n, n)), Xm, P, Tp, rowoff, G.reshape((n, n)), s, half, quarter)
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore[no-untyped-def]
+@numba.njit(cache=True, fastmath={"nsz", "contract"})
+def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = Pi_V(W + h (P + sigma(P)))`` with ``P = B X`` in ``aux``, computed on the lower
-    triangle and mirrored tile by tile; ``fin[0]`` whether ``Wn`` is finite.
+    triangle and mirrored tile by tile, compensated by ``E`` (mirrored the same way) unless
+    it is empty; ``fin[0]`` whether ``Wn`` is finite.
 
     The tile traversal is :func:`_combine`'s on purpose, with another body: passing the body
-    as a function argument would cost the inlining that lets the row loops vectorize.
+    as a function argument would cost the inlining that lets the row loops vectorize. No
+    reassociation here: it would simplify the compensation's exact error away (the pass is
+    one of several per step; benchmark 17 measures it).
     """
     n = lay.n
     s = lay.s
@@ -152,8 +156,11 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore
     Wm = W.reshape((n, n))
     P = aux.reshape((n, n))
     Wo = Wn.reshape((n, n))
+    compensated = E.shape[0] != 0
+    Em = E.reshape((n, n)) if compensated else E.reshape((0, 0))
     PT = np.empty((_TILE, _TILE), dtype=P.dtype)
     VT = np.empty((_TILE, _TILE), dtype=P.dtype)
+    ET = np.empty((_TILE, _TILE), dtype=P.dtype)
     acc = 0.0
     for bi in range(0, n, _TILE):
         ie = min(bi + _TILE, n)
@@ -167,18 +174,41 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore
                 o_row = Wo[i, bj:je]
                 pt_row = PT[ii]
                 vt_row = VT[ii]
-                for jj in range(_TILE):
-                    v = w_row[jj] + h * (p_row[jj] + s * pt_row[jj].conjugate())
-                    o_row[jj] = v
-                    vt_row[jj] = s * v.conjugate()
-                    acc += abs(v.real) + abs(v.imag)
+                if compensated:
+                    e_row = Em[i, bj:je]
+                    et_row = ET[ii]
+                    for jj in range(_TILE):
+                        d = h * (p_row[jj] + s * pt_row[jj].conjugate()) + e_row[jj]
+                        v, e = two_sum(w_row[jj], d)
+                        o_row[jj] = v
+                        e_row[jj] = e
+                        vt_row[jj] = s * v.conjugate()
+                        et_row[jj] = s * e.conjugate()
+                        acc += abs(v.real) + abs(v.imag)
+                else:
+                    for jj in range(_TILE):
+                        v = w_row[jj] + h * (p_row[jj] + s * pt_row[jj].conjugate())
+                        o_row[jj] = v
+                        vt_row[jj] = s * v.conjugate()
+                        acc += abs(v.real) + abs(v.imag)
             _store_t(VT, Wo, bi, ie, bj)
+            if compensated:
+                _store_t(ET, Em, bi, ie, bj)
         for i in range(bi, ie):  # the diagonal tile
             for j in range(bi, i + 1):
-                v = Wm[i, j] + h * (P[i, j] + s * P[j, i].conjugate())
+                d = h * (P[i, j] + s * P[j, i].conjugate())
+                if compensated:
+                    v, e = two_sum(Wm[i, j], d + Em[i, j])
+                    Em[i, j] = e
+                    Em[j, i] = s * e.conjugate()
+                else:
+                    v = Wm[i, j] + d
                 Wo[i, j] = v
                 Wo[j, i] = s * v.conjugate()
                 acc += abs(v.real) + abs(v.imag)
     if lay.traceless:
-        remove_trace(Wn, n)
+        if compensated:
+            remove_trace_compensated(Wn, E, n)
+        else:
+            remove_trace(Wn, n)
     fin[0] = math.isfinite(acc)

@@ -16,6 +16,9 @@ output (``iterate``) and the new state (``finish``). Everything else exists here
 
 * the extrapolated initial guess and the ring of stage offsets (:mod:`isoflow._compiled.flat`),
   one ring per substep position (substeps of different lengths keep separate histories);
+* the compensation of the update (``comp``, one per substep position: the rounding error
+  the position's last addition left, handed to ``finish``; an empty buffer for a method that
+  does not compensate, see :mod:`isoflow.methods.isomp`);
 * the stopping rules of :mod:`isoflow.nonlinear` (a numba compilation of the same function),
   per lane, and Anderson mixing (one lane per unit);
 * failure bookkeeping: a member whose solve fails (or whose state turns non-finite) is frozen
@@ -91,11 +94,12 @@ def _record_failure(rec, k, code, its, r):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def run_unit(  # type: ignore[no-untyped-def]
     begin, iterate, finish, f, fargs, lay, mp, nwork,
-    W, ring, head, nh, coefs, gammas, plan, data, out, solver, rec, m0,
+    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, m0,
 ):  # fmt: skip
-    """Advance one unit (flat state ``W``, its ``ring`` ``(P, K, S)`` and ``head``/``nh``
-    ``(P,)``) by ``plan.nsteps`` steps; its lanes are the members ``m0, m0 + 1, ...`` (those
-    below ``rec.shape[0]``). See the module docstring."""
+    """Advance one unit (flat state ``W``, its ``ring`` ``(P, K, S)``, ``head``/``nh``
+    ``(P,)`` and compensation ``comp`` ``(P, S)`` or ``(P, 0)``) by ``plan.nsteps`` steps; its
+    lanes are the members ``m0, m0 + 1, ...`` (those below ``rec.shape[0]``). See the module
+    docstring."""
     S = W.shape[0]
     P = gammas.shape[0]
     K = ring.shape[1]
@@ -214,7 +218,7 @@ def run_unit(  # type: ignore[no-untyped-def]
                     X, G = G, X
                 else:
                     blocks.select_lanes(lay, X, G, going)
-            finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin)
+            finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, comp[p], Wn, fin)
             for q in range(L):
                 if not ok[q]:
                     continue
@@ -280,25 +284,25 @@ def run_unit(  # type: ignore[no-untyped-def]
 # share a cache entry and one variant could load the other.
 def drive_serial(  # type: ignore[no-untyped-def]
     begin, iterate, finish, f, fargs, lay, mp, nwork,
-    W, ring, head, nh, coefs, gammas, plan, data, out, solver, rec,
+    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec,
 ):  # fmt: skip
     """:func:`run_unit` for every unit ``u`` of ``W`` (``(U, S)``), one after another."""
     L = blocks.lanes(lay)
     for u in range(W.shape[0]):
         run_unit(
-            begin, iterate, finish, f, fargs, lay, mp, nwork,
-            W[u], ring[u], head[u], nh[u], coefs, gammas, plan, data, out, solver, rec, u * L,
+            begin, iterate, finish, f, fargs, lay, mp, nwork, W[u], ring[u], head[u], nh[u],
+            comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
         )  # fmt: skip
 
 
 def drive_parallel(  # type: ignore[no-untyped-def]
     begin, iterate, finish, f, fargs, lay, mp, nwork,
-    W, ring, head, nh, coefs, gammas, plan, data, out, solver, rec,
+    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec,
 ):  # fmt: skip
     """:func:`run_unit` for every unit of ``W``, units over numba threads."""
     L = blocks.lanes(lay)
     for u in numba.prange(W.shape[0]):
         run_unit(
-            begin, iterate, finish, f, fargs, lay, mp, nwork,
-            W[u], ring[u], head[u], nh[u], coefs, gammas, plan, data, out, solver, rec, u * L,
+            begin, iterate, finish, f, fargs, lay, mp, nwork, W[u], ring[u], head[u], nh[u],
+            comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
         )  # fmt: skip

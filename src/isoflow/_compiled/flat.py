@@ -8,7 +8,9 @@ whole states entry by entry are written once, here, on flat vectors:
   stage offsets :math:`D = X - W` (:func:`guess`), and the ring itself (:func:`push`);
 * Anderson mixing of the fixed-point iterates (:func:`anderson`), the same algorithm as
   :class:`isoflow.FixedPoint` (see :mod:`isoflow.nonlinear`);
-* sums of squares and real inner products (:func:`sumsq`, :func:`sumsq_diff`, :func:`rdot`).
+* sums of squares and real inner products (:func:`sumsq`, :func:`sumsq_diff`, :func:`rdot`);
+* the exact sum of two numbers, :func:`two_sum`, for the compensated update of a state
+  (:mod:`isoflow.methods.isomp`).
 
 Element-wise loops are compiled *without* reassociation, so an entry and its mirror in a
 matrix space (``X[j, i] = s * conj(X[i, j])``) go through the same operations and stay exact
@@ -20,7 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["anderson", "copy", "guess", "push", "rdot", "sumsq", "sumsq_diff"]
+__all__ = ["anderson", "copy", "guess", "push", "rdot", "sumsq", "sumsq_diff", "two_sum"]
 
 #: Reassociation for the reductions only (sums of squares, inner products).
 _REDUCE = {"reassoc", "nsz", "contract"}
@@ -55,6 +57,21 @@ def rdot(a, b):  # type: ignore[no-untyped-def]
         y = b[i]
         acc += x.real * y.real + x.imag * y.imag
     return acc
+
+
+@numba.njit(cache=True)
+def two_sum(a, b):  # type: ignore[no-untyped-def]
+    """``(s, e)`` with ``s = fl(a + b)`` and ``a + b = s + e`` exactly (Knuth's TwoSum; real
+    or complex, part by part).
+
+    Compiled on its own without reassociation, which would simplify ``e`` to zero: the
+    callers in loops compiled with ``fastmath`` call it (LLVM keeps each instruction's flags
+    when it inlines), and ``tests/test_compensated.py`` checks that the error survives in
+    every layout.
+    """
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (b - bb)
 
 
 @numba.njit(cache=True)

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from ..kernels import ElementwiseLinear
 from . import blocks
 from .dense import SMALL_N, sigma_sign
+from .flat import two_sum
 from .layout import Layout
 
 __all__ = ["LANES", "MIN_MEMBERS", "ElementwiseLanes", "lanes_layout"]
@@ -145,17 +146,22 @@ def _stage_update1(lay, W, a, C, G, X, rr):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _advance_state(lay, W, h, C, Wn, fin):  # type: ignore[no-untyped-def]
+def _advance_state(lay, W, h, C, E, Wn, fin):  # type: ignore[no-untyped-def]
     n, L = lay.n, lay.L
     Wm = W.reshape((n, n, L))
     Cm = C.reshape((n, n, L))
     Wo = Wn.reshape((n, n, L))
+    compensated = E.shape[0] != 0
+    Em = E.reshape((n, n, L)) if compensated else E.reshape((0, 0, L))
     for q in range(L):
         fin[q] = True
     for i in range(n):
         for j in range(n):
             for q in range(L):
-                v = Wm[i, j, q] + h * Cm[i, j, q]
+                if compensated:
+                    v, Em[i, j, q] = two_sum(Wm[i, j, q], h * Cm[i, j, q] + Em[i, j, q])
+                else:
+                    v = Wm[i, j, q] + h * Cm[i, j, q]
                 Wo[i, j, q] = v
                 if not (math.isfinite(v.real) and math.isfinite(v.imag)):
                     fin[q] = False
@@ -166,7 +172,12 @@ def _advance_state(lay, W, h, C, Wn, fin):  # type: ignore[no-untyped-def]
                 tr += Wo[i, i, q]
             tr = tr / n
             for i in range(n):
-                Wo[i, i, q] -= tr
+                if compensated:
+                    v, e = two_sum(Wo[i, i, q], -tr)
+                    Wo[i, i, q] = v
+                    Em[i, i, q] += e
+                else:
+                    Wo[i, i, q] -= tr
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)

@@ -216,12 +216,14 @@ def _stage_update1(lay, W, a, C, G, X, rr):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _advance_state(lay, W, h, C, Wn, fin):  # type: ignore[no-untyped-def]
-    """``Wn = Pi_V(W + h C)`` on each field; finite when both are."""
+def _advance_state(lay, W, h, C, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = Pi_V(W + h C)`` on each field (each compensated by its half of ``E`` unless
+    ``E`` is empty); finite when both are."""
     m = lay.n * lay.n
-    blocks.advance_state(_field(lay), W[:m], h, C[:m], Wn[:m], fin)
+    E0, E1 = (E, E) if E.shape[0] == 0 else (E[:m], E[m:])
+    blocks.advance_state(_field(lay), W[:m], h, C[:m], E0, Wn[:m], fin)
     first = fin[0]
-    blocks.advance_state(_field(lay), W[m:], h, C[m:], Wn[m:], fin)
+    blocks.advance_state(_field(lay), W[m:], h, C[m:], E1, Wn[m:], fin)
     fin[0] = fin[0] and first
 
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..algebras import SL2Vectors, SpinVectors
 from . import blocks
+from .flat import two_sum
 from .layout import Layout, member_layout
 
 __all__ = [
@@ -169,13 +170,20 @@ def flat_stage_update1(lay, W, a, C, G, X, rr):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def flat_advance_state(lay, W, h, C, Wn, fin):  # type: ignore[no-untyped-def]
-    """``Wn = W + h C``; ``fin[0]`` whether it is finite."""
+def flat_advance_state(lay, W, h, C, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = W + h C`` (compensated by ``E`` unless it is empty); ``fin[0]`` whether it is
+    finite."""
     acc = 0.0
-    for i in range(W.shape[0]):
-        v = W[i] + h * C[i]
-        Wn[i] = v
-        acc += abs(v)
+    if E.shape[0] == 0:
+        for i in range(W.shape[0]):
+            v = W[i] + h * C[i]
+            Wn[i] = v
+            acc += abs(v)
+    else:
+        for i in range(W.shape[0]):
+            v, E[i] = two_sum(W[i], h * C[i] + E[i])
+            Wn[i] = v
+            acc += abs(v)
     fin[0] = math.isfinite(acc)
 
 

@@ -31,7 +31,7 @@ from .._stepping import Runner
 from ..kernels import CompiledB
 from ..methods import Composition, Method
 from ..methods import composition as _composition
-from ..methods.isomp import extrapolation_weights
+from ..methods.isomp import extrapolation_weights, pack_state, state_parts
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
 from . import driver
@@ -83,6 +83,7 @@ def layout_for(
 def compiled_runner(
     problem: IsospectralProblem, method: Method, y: Array, h: float, *,
     method_state: Any = None, k: int = 0, failures: MemberFailures | None = None,
+    t0: float = 0.0,
 ) -> CompiledRunner | None:  # fmt: skip
     """A :class:`CompiledRunner` for the run, or ``None`` when it has no compiled path."""
     if problem.kernel is None:
@@ -93,6 +94,8 @@ def compiled_runner(
         base, gammas = method.base, tuple(method.coefficients)
     stage = stage_for(base)
     if stage is None or type(getattr(base, "solver", None)) is not FixedPoint:
+        return None
+    if not stage.applies(base, problem, isinstance(method, Composition)):
         return None
     alg = problem.algebra
     y = np.asarray(y)
@@ -106,7 +109,7 @@ def compiled_runner(
     return CompiledRunner(
         layout, impl, stage, problem, base, np.asarray(gammas, dtype=np.float64), y, h,
         method_state=method_state, k=k, failures=failures,
-        composed=isinstance(method, Composition),
+        composed=isinstance(method, Composition), t0=t0,
     )  # fmt: skip
 
 
@@ -121,9 +124,10 @@ class CompiledRunner(Runner):
         self, layout: Layout, impl: StageOnLayout, stage: CompiledStage,
         problem: IsospectralProblem, method: Any, gammas: Array, y: Array, h: float, *,
         method_state: Any = None, k: int = 0, failures: MemberFailures | None = None,
-        composed: bool = False,
+        composed: bool = False, t0: float = 0.0,
     ) -> None:  # fmt: skip
         super().__init__()
+        self.t0 = float(t0)
         alg = problem.algebra
         self.composed = composed
         self.layout = layout
@@ -143,7 +147,7 @@ class CompiledRunner(Runner):
         field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
-        self.mp = stage.params(method, problem)
+        self.mp = stage.params(method, problem, tuple(float(g) * float(h) for g in gammas))
         self.stage = stage
         self.method = method
         self.problem = problem
@@ -162,11 +166,15 @@ class CompiledRunner(Runner):
         self.ring = np.zeros((self.U, P, K, S), dtype=self.W.dtype)
         self.head = np.zeros((self.U, P), dtype=np.int64)
         self.nh = np.zeros((self.U, P), dtype=np.int64)
-        self._user: tuple[int, Array, Array] | None = None
+        self.compensated = stage.compensated(method)
+        self.comp = np.zeros((self.U, P, S if self.compensated else 0), dtype=self.W.dtype)
+        self._user: tuple[int, Array, Array, Array] | None = None
         if layout.restart_at_saves:  # what state() exports before the first save point
             user = np.zeros((P, K, self.M, *self.core), dtype=self.W.dtype)
-            self._load_offsets(method_state, user)
-            self._user = (self.k, np.array(y, copy=True).reshape(self.M, *self.core), user)
+            user_comp = np.zeros((P, self.M, *self.core), dtype=self.W.dtype)
+            self._load_offsets(method_state, user, user_comp)
+            y_user = np.array(y, copy=True).reshape(self.M, *self.core)
+            self._user = (self.k, y_user, user, user_comp)
         else:
             self._load_offsets(method_state)
         self.rec = np.zeros((self.M, driver.REC_SIZE))
@@ -193,16 +201,23 @@ class CompiledRunner(Runner):
         P = self.gammas.shape[0]
         return _composition._unpack(state, P) if self.composed else [state]
 
-    def _load_offsets(self, state: Any, user: Array | None = None) -> None:
-        """The ring from the method state's offsets (user's layout); with ``user``
-        (``(P, K, M, *core)``), the given offsets are also kept there, slot by slot."""
-        if self.kmax == 0:
-            return
+    def _load_offsets(
+        self, state: Any, user: Array | None = None, user_comp: Array | None = None
+    ) -> None:
+        """The ring and the compensation from the method state (user's layout); with
+        ``user`` (``(P, K, M, *core)``) and ``user_comp`` (``(P, M, *core)``), the given
+        values are also kept there."""
         for p, st in enumerate(self._position_states(state)):
             hp = float(self.gammas[p]) * self.h
-            if st is None or len(st) < 2 or st[0] != hp:
+            offsets, E = state_parts(st, hp)
+            if self.compensated and E is not None:
+                Em = np.asarray(E).reshape(self.M, *self.core)
+                self.comp[:, p] = self.layout.to_units(Em)
+                if user_comp is not None:
+                    user_comp[p] = Em
+            if self.kmax == 0 or not offsets:
                 continue
-            offsets = st[1 : 1 + self.kmax]
+            offsets = offsets[: self.kmax]
             nh = len(offsets)
             for q, D in enumerate(offsets):  # newest first
                 Dm = np.asarray(D).reshape(self.M, *self.core)
@@ -213,7 +228,7 @@ class CompiledRunner(Runner):
             self.nh[:, p] = nh
 
     def _export_offsets(self) -> Any:
-        if self.kmax == 0:
+        if self.kmax == 0 and not self.compensated:
             return None
         L = self.layout.lanes
         alive_units = np.zeros(self.U, dtype=bool)
@@ -224,8 +239,8 @@ class CompiledRunner(Runner):
         states: list[Any] = []
         for p in range(self.gammas.shape[0]):
             nh_p = self.nh[alive_units, p] if alive_units.any() else self.nh[:, p]
-            nh = int(nh_p.max())
-            out: list[Any] = [float(self.gammas[p]) * self.h]
+            nh = int(nh_p.max()) if self.kmax else 0
+            out: list[Any] = []
             for q in range(nh):
                 slots = (self.head[:, p] - q) % K
                 if user is not None:
@@ -235,7 +250,14 @@ class CompiledRunner(Runner):
                         self.layout.offsets_from_units(self.ring[units, p, slots]), copy=True
                     )
                 out.append(D[0] if self.batch == () else D)  # members flattened, as PythonRunner
-            states.append(tuple(out) if nh else None)
+            E = None
+            if self.compensated:
+                if user is not None:
+                    E = user[3][p].copy()
+                else:
+                    E = np.array(self.layout.from_units(self.comp[:, p]), copy=True)
+                E = E[0] if self.batch == () else E
+            states.append(pack_state(float(self.gammas[p]) * self.h, tuple(out), E))
         return _composition._pack(states) if self.composed else states[0]
 
     def state(self) -> tuple[Array, Any]:
@@ -310,11 +332,15 @@ class CompiledRunner(Runner):
         self.W = np.ascontiguousarray(L.to_units(y))
         P, K = self.ring.shape[1], self.ring.shape[2]
         user = np.empty((P, K, *y.shape), dtype=y.dtype)
+        user_comp = np.zeros((P, *y.shape), dtype=y.dtype)
         for p in range(P):
             for q in range(K):
                 user[p, q] = L.offsets_from_units(self.ring[:, p, q])
                 self.ring[:, p, q] = L.to_units(user[p, q])
-        self._user = (self.k, y, user)
+            if self.compensated:
+                user_comp[p] = L.from_units(self.comp[:, p])
+                self.comp[:, p] = L.to_units(user_comp[p])
+        self._user = (self.k, y, user, user_comp)
 
     def _rows_buffer(self, out: Array) -> Array:
         """Where the driver writes the saved rows: ``out`` itself when a unit is a member in
@@ -377,7 +403,8 @@ class CompiledRunner(Runner):
         data = self._step_data(k0, nsteps, members)
         return (
             self.layout.record, self.mp, self.impl.nwork, self.W[units], self.ring[units],
-            self.head[units], self.nh[units], self.coefs, self.gammas, plan, data, rows,
+            self.head[units], self.nh[units], self.comp[units], self.coefs, self.gammas, plan,
+            data, rows,
             self.solver, self.rec[members],
         )  # fmt: skip
 
@@ -388,7 +415,7 @@ class CompiledRunner(Runner):
         if self.stage.step_data is None:
             return no_step_data(nsteps, idx.size)
         idx = np.where(idx < self.M, idx, -1)
-        request = StepDataRequest(int(k0), int(nsteps), idx, self.h)
+        request = StepDataRequest(int(k0), int(nsteps), idx, self.h, self.t0)
         data = np.ascontiguousarray(
             self.stage.step_data(self.method, self.problem, request), dtype=np.float64
         )
@@ -432,12 +459,17 @@ class CompiledRunner(Runner):
         (Such a run has one member per unit: only built-in kernels run as lanes.)"""
         return isinstance(self.kernel, CompiledB) and self.layout.lanes == 1
 
+    @property
+    def _changed(self) -> tuple[Array, ...]:
+        """The arrays a call changes."""
+        return (self.W, self.ring, self.head, self.nh, self.comp, self.rec)
+
     def _arrays(self, units: slice) -> tuple[Array, ...]:
         """Copies of what a call changes for the ``units`` (members: one per unit)."""
-        return tuple(a[units].copy() for a in (self.W, self.ring, self.head, self.nh, self.rec))
+        return tuple(a[units].copy() for a in self._changed)
 
     def _set_arrays(self, units: slice, saved: tuple[Array, ...]) -> None:
-        for a, b in zip((self.W, self.ring, self.head, self.nh, self.rec), saved, strict=True):
+        for a, b in zip(self._changed, saved, strict=True):
             a[units] = b
 
     def _isolate(self, members: NDArray[np.intp], nsteps: int, grid: SaveGrid, buf: Array) -> None:

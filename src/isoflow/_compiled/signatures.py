@@ -52,7 +52,7 @@ class DriverTypes:
         head = (self.f, self.fargs, numba.typeof(lay), numba.typeof(mp), SD)
         self.begin = types.FunctionType(types.none(*head, A1, f8))
         self.iterate = types.FunctionType(types.none(*head, A1, A1, A1, A1, A2, f8, F1))
-        self.finish = types.FunctionType(types.none(*head, A1, A1, A1, A2, f8, A1, B1))
+        self.finish = types.FunctionType(types.none(*head, A1, A1, A1, A2, f8, A1, A1, B1))
 
     def compile_stage(self, begin: Any, iterate: Any, finish: Any) -> None:
         """Compile the stage functions for these types (loaded from the cache when there)."""

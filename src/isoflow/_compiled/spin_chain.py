@@ -34,6 +34,7 @@ import numpy as np
 from ..algebras import SpinVectors
 from ..kernels import SpinNeighbourSum
 from . import blocks
+from .flat import two_sum
 from .layout import Layout
 from .particles import (
     flat_advance_state,
@@ -233,21 +234,32 @@ def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     rr[0] = acc
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def _final(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B(Y) x Y`` (flat ``(3, N)``); returns a sum that is finite iff every entry
-    is."""
+@numba.njit(cache=True, fastmath={"nsz"})
+def _final(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(Y) x Y`` (flat ``(3, N)``), compensated by ``E`` unless it is empty;
+    returns a sum that is finite iff every entry is. Compiled without reassociation (the
+    compensation's exact error would be simplified away)."""
     acc = 0.0
+    n = _U(N)
+    n2 = n + n
+    compensated = E.shape[0] != 0
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
-        n, k = _U(N), _U(i)
-        n2 = n + n
+        k = _U(i)
         y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
         b0, b1, b2 = _b(Y, N, c, im, ip)
-        v0 = W[k] + h * (b1 * y2 - b2 * y1)
-        v1 = W[n + k] + h * (b2 * y0 - b0 * y2)
-        v2 = W[n2 + k] + h * (b0 * y1 - b1 * y0)
+        d0 = h * (b1 * y2 - b2 * y1)
+        d1 = h * (b2 * y0 - b0 * y2)
+        d2 = h * (b0 * y1 - b1 * y0)
+        if compensated:
+            v0, E[k] = two_sum(W[k], d0 + E[k])
+            v1, E[n + k] = two_sum(W[n + k], d1 + E[n + k])
+            v2, E[n2 + k] = two_sum(W[n2 + k], d2 + E[n2 + k])
+        else:
+            v0 = W[k] + d0
+            v1 = W[n + k] + d1
+            v2 = W[n2 + k] + d2
         Wn[k] = v0
         Wn[n + k] = v1
         Wn[n2 + k] = v2
@@ -256,15 +268,15 @@ def _final(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def finish_iso(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore[no-untyped-def]
+def finish_iso(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(X) x X`` from the accepted ``X`` (the bracket of its last evaluation)."""
-    fin[0] = math.isfinite(_final(X, W, Wn, lay.N, lay.c, hp))
+    fin[0] = math.isfinite(_final(X, W, Wn, E, lay.N, lay.c, hp))
 
 
 @numba.njit(cache=True)
-def finish_smm(f, fargs, lay, mp, sd, W, X, aux, work, hp, Wn, fin):  # type: ignore[no-untyped-def]
+def finish_smm(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(m) x m`` with the points ``m`` of the last iteration (``work[0]``)."""
-    fin[0] = math.isfinite(_final(work[0], W, Wn, lay.N, lay.c, hp))
+    fin[0] = math.isfinite(_final(work[0], W, Wn, E, lay.N, lay.c, hp))
 
 
 def isomp_sweeps(layout: Layout) -> tuple[Any, Any]:

@@ -32,6 +32,8 @@ _WHERE = {
     "paper_inertia_d": "_rigid_body",
     "paper_spin_curve": "_heisenberg_chain",
     "paper_vortex_config": "_hyperbolic_vortices",
+    "qg_operator": "_qg_sphere",
+    "qg_sphere": "_qg_sphere",
     "rigid_body": "_rigid_body",
     "sphere_vortices": "_sphere_vortices",
     "spin_lattice": "_spin_lattice",

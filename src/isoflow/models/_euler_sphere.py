@@ -18,18 +18,21 @@ from ..kernels import CompiledB
 from ..problems import IsospectralProblem
 from ..sphere import (
     angular_momentum,
+    degree_order,
     energy,
     enstrophy,
     from_coefficients,
     hbar,
     laplacian_coefficients,
     random_coefficients,
+    solve_poisson,
     vorticity_from_function,
 )
 from ..sphere._operators import check_N
 from ._checks import require_memory
+from ._forced import budget_invariants, check_double_bracket, sphere_split
 
-__all__ = ["coriolis_matrix", "euler_sphere"]
+__all__ = ["coriolis_matrix", "euler_sphere", "initial_vorticity"]
 
 Array = NDArray[Any]
 
@@ -47,12 +50,52 @@ def coriolis_matrix(N: int, omega: float) -> Array:
     return np.diag(2j * float(omega) * hbar(N) * m)
 
 
-def _real_parameter(v: Any, what: str) -> float:
+def real_parameter(v: Any, what: str, model: str = "euler_sphere") -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-        raise ParameterError(f"euler_sphere: {what} must be a real number, got {v!r}")
+        raise ParameterError(f"{model}: {what} must be a real number, got {v!r}")
     if not np.isfinite(v):
-        raise ParameterError(f"euler_sphere: {what} must be finite, got {v!r}")
+        raise ParameterError(f"{model}: {what} must be finite, got {v!r}")
     return float(v)
+
+
+def initial_vorticity(
+    N: int,
+    initial: str | ArrayLike | Callable[[Array, Array], ArrayLike],
+    seed: Any,
+    *,
+    lmin: int,
+    lmax: int | None,
+    slope: float | None,
+    rms: Any,
+    W0: ArrayLike | None,
+    model: str,
+) -> tuple[Array, str, dict[str, Any]]:
+    """The initial relative vorticity in ``su(N)`` of a sphere model, its kind (``"random"``,
+    ``"coefficients"``, ``"function"``, ``"matrix"``) and, for random data, the parameters of
+    their spectrum (see :func:`euler_sphere` for the arguments and the errors)."""
+    rms_ = real_parameter(rms, "rms", model)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError(f"{model}: seed must be an integer >= 0, got {seed!r}")
+    rng = generator(int(seed), f"{model}: seed")
+    lmax_ = min(10, N - 1) if lmax is None else check_N(lmax, f"{model}: lmax", minimum=1)
+    if lmax_ > N - 1:
+        raise ParameterError(f"{model}: lmax must be <= N - 1 = {N - 1}, got {lmax_}")
+    if W0 is not None:
+        if not (isinstance(initial, str) and initial == "random"):
+            raise ParameterError(f"{model}: give the initial vorticity by initial or W0")
+        return su(N).validate(W0, "W0"), "matrix", {}
+    if isinstance(initial, str):
+        if initial != "random":
+            raise ParameterError(
+                f"{model}: initial must be 'random', coefficients or a function, got {initial!r}"
+            )
+        c = random_coefficients(lmax_, lmin=lmin, slope=slope, rms=rms_, seed=rng)
+        return from_coefficients(c, N), "random", {
+            "lmin": int(lmin), "lmax": lmax_, "slope": slope, "rms": rms_,
+        }  # fmt: skip
+    if callable(initial):
+        return vorticity_from_function(initial, N), "function", {}
+    return from_coefficients(initial, N), "coefficients", {}
 
 
 def euler_sphere(
@@ -66,6 +109,14 @@ def euler_sphere(
     slope: float | None = None,
     rms: float = 1.0,
     W0: ArrayLike | None = None,
+    viscosity: float = 0.0,
+    hyperviscosity: tuple[float, float] | None = None,
+    drag: float = 0.0,
+    forcing: Any = None,
+    forcing_band: tuple[int, int] | None = None,
+    energy_rate: float | None = None,
+    forcing_seed: int | None = None,
+    double_bracket: float = 0.0,
 ) -> tuple[IsospectralProblem, Array]:
     r"""Zeitlin's model of the Euler equations on the sphere, and its initial state.
 
@@ -113,6 +164,28 @@ def euler_sphere(
     W0 : array_like, optional
         The initial relative vorticity as matrices ``(*batch, N, N)`` in ``su(N)``, instead of
         ``initial``.
+    viscosity, hyperviscosity, drag : float, (float, float), float
+        Dissipation of the relative vorticity,
+        :math:`\dot\omega = \dots + \nu\Delta\omega - \nu_p(-\Delta)^p\omega - \alpha\omega`,
+        ``hyperviscosity=(nu_p, p)`` with ``p >= 1``: the linear part
+        :class:`~isoflow.sphere.SphereDissipation` with the rates
+        :math:`c_l = \nu l(l+1) + \nu_p (l(l+1))^p + \alpha`, applied exactly per degree.
+    forcing : matrix, iso.Forcing, iso.StochasticForcing or a list, optional
+        Forcing of the relative vorticity: a matrix in ``su(N)`` (steady), an
+        :class:`~isoflow.Forcing` (time-dependent amplitudes), white noise on a band of degrees
+        (:func:`isoflow.sphere.band_forcing`).
+    forcing_band, energy_rate, forcing_seed : (int, int), float, int
+        The same white-noise band by its numbers (what ``isoflow run`` and TOML files give):
+        degrees ``lf - dl .. lf + dl``, the mean energy injection rate (default 1), the seed of
+        the noise (default 0).
+    double_bracket : float
+        Selective decay :math:`\alpha_{db} \ge 0`: ``B`` gains :math:`-\alpha_{db}[\Psi, Q]`
+        (:func:`isoflow.sphere.compiled.euler_double_bracket_field`): the energy decreases, every
+        Casimir is kept (the flow stays isospectral; IsoMP integrates it as it is).
+
+    With dissipation or forcing the problem has a linear part and forcing terms, and runs with
+    the split method :class:`~isoflow.Strang` (``iso.Strang()``); its diagnostics then include
+    the energy and enstrophy budgets and spectra (:mod:`isoflow.models._forced`).
 
     Returns
     -------
@@ -202,49 +275,35 @@ def euler_sphere(
     """
     N = check_N(N, "euler_sphere: N")
     require_memory(16.0 * N * N, _BUILD_PEAK_STATES, f"euler_sphere: N = {N}")
-    Om = _real_parameter(omega, "omega")
-    rms = _real_parameter(rms, "rms")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ParameterError(f"euler_sphere: seed must be an integer >= 0, got {seed!r}")
-    seed_ = int(seed)
-    rng = generator(seed_, "euler_sphere: seed")
+    Om = real_parameter(omega, "omega")
     alg = su(N)
     h = hbar(N)
-    lmax_ = min(10, N - 1) if lmax is None else check_N(lmax, "euler_sphere: lmax", minimum=1)
-    if lmax_ > N - 1:
-        raise ParameterError(f"euler_sphere: lmax must be <= N - 1 = {N - 1}, got {lmax_}")
-
-    kind: str
-    if W0 is not None:
-        if not (isinstance(initial, str) and initial == "random"):
-            raise ParameterError("euler_sphere: give the initial vorticity by initial or W0")
-        W = alg.validate(W0, "W0")
-        kind = "matrix"
-    elif isinstance(initial, str):
-        if initial != "random":
-            raise ParameterError(
-                f"euler_sphere: initial must be 'random', coefficients or a function, "
-                f"got {initial!r}"
-            )
-        c = random_coefficients(lmax_, lmin=lmin, slope=slope, rms=rms, seed=rng)
-        W = from_coefficients(c, N)
-        kind = "random"
-    elif callable(initial):
-        W = vorticity_from_function(initial, N)
-        kind = "function"
-    else:
-        W = from_coefficients(initial, N)
-        kind = "coefficients"
+    W, kind, data_params = initial_vorticity(
+        N, initial, seed, lmin=lmin, lmax=lmax, slope=slope, rms=rms, W0=W0, model="euler_sphere"
+    )
+    seed_ = int(seed)
 
     F = coriolis_matrix(N, Om)
     Q0 = W + F
     coef = laplacian_coefficients(N)
     shift = 1j * Om * (np.arange(N) - 0.5 * (N - 1))  # F / (2 hbar)
-    from ..sphere.compiled import euler_field
+    from ..sphere.compiled import euler_double_bracket_field, euler_field
 
-    kernel = CompiledB(
-        euler_field, (coef.inv_piv, coef.mult, 1.0 / h, shift), name="euler_sphere_field"
-    )
+    alpha = check_double_bracket(double_bracket, "euler_sphere")
+    if alpha:
+        kernel = CompiledB(
+            euler_double_bracket_field, (coef.inv_piv, coef.mult, 1.0 / h, shift, h, alpha),
+            name="euler_sphere_double_bracket_field",
+        )  # fmt: skip
+    else:
+        kernel = CompiledB(
+            euler_field, (coef.inv_piv, coef.mult, 1.0 / h, shift), name="euler_sphere_field"
+        )
+    split = sphere_split(
+        N, viscosity=viscosity, hyperviscosity=hyperviscosity, drag=drag, forcing=forcing,
+        planetary=F, model="euler_sphere", forcing_band=forcing_band, energy_rate=energy_rate,
+        forcing_seed=forcing_seed,
+    )  # fmt: skip
 
     def hamiltonian(Q: Array) -> Array:
         return energy(np.asarray(Q) - F)
@@ -255,9 +314,32 @@ def euler_sphere(
     else:
         invariants["angular_momentum_z"] = lambda Q: angular_momentum(np.asarray(Q) - F)[..., 2]
 
+    if split.active or alpha:
+
+        def tendency(Q: Array) -> Array:
+            Qa = np.asarray(Q)
+            B = solve_poisson(Qa) / h + np.diag(shift)
+            return B @ Qa - Qa @ B
+
+        degrees = degree_order(N - 1)[0]
+
+        def relative(Q: Array) -> Array:
+            return np.asarray(Q) - F
+
+        def noise_weight(modes: Array) -> Array:
+            return 1.0 / (degrees[modes] * (degrees[modes] + 1.0))
+
+        invariants.update(
+            budget_invariants(
+                N, split, relative, lambda Q: solve_poisson(relative(Q)), tendency, noise_weight
+            )
+        )
+
     parameters: dict[str, Any] = {"N": N, "omega": Om, "hbar": h, "seed": seed_, "initial": kind}
-    if kind == "random":  # the spectrum of the random data
-        parameters.update(lmin=int(lmin), lmax=lmax_, slope=slope, rms=rms)
+    parameters.update(data_params)
+    parameters.update(split.parameters)
+    if alpha:
+        parameters["double_bracket"] = alpha
     problem = IsospectralProblem(
         algebra=alg,
         kernel=kernel,
@@ -265,5 +347,7 @@ def euler_sphere(
         invariants=invariants,
         name=f"Euler equations on the sphere, su({N})" + (f", Omega = {Om:g}" if Om else ""),
         parameters=parameters,
+        linear_part=split.linear_part,
+        forcing=split.forcing,
     )
     return problem, Q0

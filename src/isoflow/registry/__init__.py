@@ -75,6 +75,7 @@ from ._methods import (
     SolverSpec,
     make_method,
     make_solver,
+    split_method,
 )
 from ._params import ConfigError, Param, parse_param, parse_params
 
@@ -106,4 +107,5 @@ __all__ = [
     "parse_param",
     "parse_params",
     "read_toml",
+    "split_method",
 ]

@@ -26,8 +26,8 @@ from ._params import ConfigError, Param
 
 __all__ = [
     "DENSE_MAX_N",
-    "MHD_MAX_N",
     "ENTRY_POINT_GROUP",
+    "MHD_MAX_N",
     "MODELS",
     "MODEL_ALIASES",
     "ModelSpec",
@@ -188,6 +188,33 @@ def _seed(help_: str = "seed of the random initial data") -> Param:
     return Param(int, 0, help_, low=0)
 
 
+def _sphere_data_params(what: str) -> dict[str, Param]:
+    """The initial data, dissipation and forcing parameters of the sphere models."""
+    return {
+        "seed": _seed(f"seed of the random initial {what}"),
+        "lmin": Param(int, 1, f"lowest degree of the random initial {what}", low=1),
+        "lmax": Param(
+            int, None, f"highest degree of the random initial {what} (min(10, N-1))", low=1
+        ),
+        "slope": Param(float, None, "energy spectrum E_l ~ l^slope of the data (white if unset)"),
+        "rms": Param(float, 1.0, f"root-mean-square initial {what}", low=0.0),
+        "viscosity": Param(float, None, "viscosity nu (nu Delta)", low=0.0),
+        "hyperviscosity": Param(
+            float, None, "hyperviscosity nu_p, p: -nu_p (-Delta)^p, p >= 1", low=0.0, length=2
+        ),
+        "drag": Param(float, None, "linear drag alpha", low=0.0),
+        "forcing_band": Param(
+            int,
+            None,
+            "white-noise forcing of the degrees lf - dl .. lf + dl: lf, dl",
+            low=0,
+            length=2,
+        ),
+        "energy_rate": Param(float, None, "mean energy injection of the forcing band", low=0.0),
+        "forcing_seed": Param(int, None, "seed of the forcing noise", low=0),
+    }
+
+
 #: Largest matrix size ``n`` of a dense model from the command line (a state of 32 MiB, real).
 DENSE_MAX_N = 2048
 #: Largest ``N`` of MHD on the sphere from the command line: two complex fields (32 MiB) and six
@@ -272,20 +299,28 @@ MODELS: dict[str, ModelSpec] = {
             {
                 "N": _size("matrix size of su(N): degrees l <= N - 1", 128, 2, DENSE_MAX_N),
                 "omega": Param(float, 0.0, "angular velocity of the sphere"),
-                "seed": _seed("seed of the random initial vorticity"),
-                "lmin": Param(int, 1, "lowest degree of the random initial vorticity", low=1),
-                "lmax": Param(
-                    int,
-                    None,
-                    "highest degree of the random initial vorticity (min(10, N-1))",
-                    low=1,
+                **_sphere_data_params("vorticity"),
+                "double_bracket": Param(
+                    float, None, "selective decay: energy dissipated, Casimirs kept", low=0.0
                 ),
-                "slope": Param(
-                    float, None, "energy spectrum E_l ~ l^slope of the data (white if unset)"
-                ),
-                "rms": Param(float, 1.0, "root-mean-square initial vorticity", low=0.0),
             },
             "Zeitlin's quantized Euler equations on the (rotating) sphere, su(N)",
+            builtin=True,
+            initial=("seed", "lmin", "lmax", "slope", "rms"),
+        ),
+        ModelSpec(
+            "qg-sphere",
+            "isoflow.models:qg_sphere",
+            {
+                "N": _size("matrix size of su(N): degrees l <= N - 1", 128, 2, DENSE_MAX_N),
+                "lamb": Param(float, 0.0, "Lamb parameter F (0: Euler)", low=0.0),
+                "omega": Param(float, 0.0, "angular velocity of the sphere"),
+                "deformation_radius": Param(
+                    float, None, "Helmholtz variant: kappa = 1/deformation_radius", low=0.0
+                ),
+                **_sphere_data_params("potential vorticity"),
+            },
+            "shallow-water quasi-geostrophic model on the rotating sphere, su(N)",
             builtin=True,
             initial=("seed", "lmin", "lmax", "slope", "rms"),
         ),

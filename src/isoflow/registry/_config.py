@@ -26,8 +26,9 @@ from .._solve import time_grid
 from ..methods import Method
 from ..nonlinear import NonlinearSolver
 from ..problems import IsospectralProblem
+from ..splitting import has_split_part
 from ._catalogue import MODELS, ModelSpec, check_model_name, load_model
-from ._methods import ANDERSON_MAX, METHODS, SOLVERS, make_method, make_solver
+from ._methods import ANDERSON_MAX, METHODS, SOLVERS, make_method, make_solver, split_method
 from ._params import ConfigError, Param, choice, json_value, parse_params
 
 __all__ = [
@@ -198,7 +199,9 @@ def build(
     Parameters
     ----------
     config : mapping
-        A run configuration (checked with :func:`normalize_config`).
+        A run configuration (checked with :func:`normalize_config`). A model with
+        dissipation or forcing (a linear part or forcing terms) gets the configured method as
+        the isospectral part of a split step (:func:`~isoflow.registry.split_method`).
     model : ModelSpec, optional
         Required when the configuration names a model that is not built in: this function
         never imports a module because a configuration (e.g. one read from a result file)
@@ -227,6 +230,8 @@ def build(
     else:
         solver = None
     method = make_method(cfg["method"], solver)
+    if has_split_part(problem):  # dissipation or forcing: the method runs as a split step
+        method = split_method(method, problem)
     kwargs: dict[str, Any] = {
         k: cfg[k] for k in ("t0", "dt", "t1", "n_steps", "save_every") if k in cfg
     }

@@ -13,9 +13,20 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from ..methods import RK4, ClassicalMidpoint, Composition, IsoMP, IsoSyRK, Method, SphericalMidpoint
+from ..methods import (
+    RK4,
+    ClassicalMidpoint,
+    Composition,
+    IsoMP,
+    IsoSyRK,
+    Method,
+    SphericalMidpoint,
+    Strang,
+)
 from ..methods.composition import SCHEMES
 from ..nonlinear import ANDERSON_MAX, FixedPoint, Newton, NonlinearSolver
+from ..problems import IsospectralProblem
+from ..splitting import data_widths
 from ._params import ConfigError, choice
 
 __all__ = [
@@ -26,6 +37,7 @@ __all__ = [
     "SolverSpec",
     "make_method",
     "make_solver",
+    "split_method",
 ]
 
 
@@ -137,3 +149,13 @@ def make_method(name: str, solver: NonlinearSolver | None = None) -> Method:
             raise ConfigError(f"method {name!r} is explicit: it takes no nonlinear solver")
         return spec.make(None)
     return spec.make(solver if solver is not None else FixedPoint())
+
+
+def split_method(method: Method, problem: IsospectralProblem) -> Method:
+    """The split step of ``method`` for a problem with a linear part or forcing:
+    ``Strang(method)``, and for a composition the composition of the split step
+    (``Composition(Strang(base), scheme)``, of the composition's order) unless the forcing has
+    step data (time-dependent amplitudes, noise), which belong to whole steps."""
+    if isinstance(method, Composition) and sum(data_widths(problem)) == 0:
+        return Composition(Strang(method.base), method.scheme)
+    return Strang(method)

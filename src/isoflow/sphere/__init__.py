@@ -72,6 +72,8 @@ Grids (``ducc0``): :func:`grid`, :func:`synthesize`, :func:`analyze`, :func:`eva
 :func:`from_function`, :func:`to_grid`.
 Initial data: :func:`random_coefficients`, :func:`random_vorticity`,
 :func:`vorticity_from_function`.
+Dissipation and forcing: :class:`SphereDissipation`, :func:`degree_rates`,
+:func:`band_forcing`, :func:`band_modes`.
 Diagnostics: :func:`casimirs`, :func:`vorticity_levels`, :func:`energy`, :func:`enstrophy`,
 :func:`energy_spectrum`, :func:`enstrophy_spectrum`, :func:`angular_momentum`.
 Two fields (magnetohydrodynamics, :func:`isoflow.models.mhd_sphere`): :func:`current`,
@@ -101,6 +103,10 @@ from ._diagnostics import energy_spectrum as energy_spectrum
 from ._diagnostics import enstrophy as enstrophy
 from ._diagnostics import enstrophy_spectrum as enstrophy_spectrum
 from ._diagnostics import vorticity_levels as vorticity_levels
+from ._dissipation import SphereDissipation as SphereDissipation
+from ._dissipation import band_forcing as band_forcing
+from ._dissipation import band_modes as band_modes
+from ._dissipation import degree_rates as degree_rates
 from ._grid import GEOMETRIES as GEOMETRIES
 from ._grid import analyze as analyze
 from ._grid import evaluate as evaluate
@@ -132,15 +138,19 @@ from .figures import plot_orthographic as plot_orthographic
 __all__ = [
     "GEOMETRIES",
     "LaplacianCoefficients",
+    "SphereDissipation",
     "analyze",
     "angular_momentum",
     "animate",
+    "band_forcing",
+    "band_modes",
     "basis_matrix",
     "casimirs",
     "coefficient_count",
     "cross_casimirs",
     "current",
     "degree_order",
+    "degree_rates",
     "diagonal_bases",
     "draw_field_lines",
     "energy",

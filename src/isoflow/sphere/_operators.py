@@ -15,6 +15,7 @@ __all__ = [
     "LaplacianCoefficients",
     "as_matrices",
     "check_N",
+    "factor_diagonals",
     "hbar",
     "laplacian",
     "laplacian_block",
@@ -153,6 +154,24 @@ def laplacian_coefficients(N: int) -> LaplacianCoefficients:
     a = np.arange(N, dtype=np.float64)
     diag = 2.0 * a[:, None] * a[None, :] - (N - 1.0) * (a[:, None] + a[None, :] + 1.0)
     gamma = np.sqrt(np.arange(N + 1.0) * (N - np.arange(N + 1.0)))
+    inv_piv, mult = factor_diagonals(diag, gamma)
+    # The main diagonal's block has the identity in its kernel: its last pivot is zero up to
+    # rounding and is not used (the solve pins that entry and removes the mean afterwards).
+    inv_piv[N - 1, N - 1] = 0.0
+    for arr in (diag, gamma, inv_piv, mult):
+        arr.setflags(write=False)
+    return LaplacianCoefficients(N=N, diag=diag, gamma=gamma, inv_piv=inv_piv, mult=mult)
+
+
+def factor_diagonals(diag: Array, gamma: Array) -> tuple[Array, Array]:
+    r"""``(inv_piv, mult)``: the :math:`LDL^T` factorizations, in position, of the symmetric
+    tridiagonal blocks of every diagonal of an operator whose entry ``(a, b)`` has the
+    coefficient ``diag[a, b]`` and couples to ``(a-1, b-1)`` with :math:`\gamma_a\gamma_b`
+    (:math:`\Delta_N`, or :math:`\Delta_N` shifted per entry; see
+    :class:`LaplacianCoefficients`). No pivoting: every block must be definite (the
+    Laplacian's singular main block is handled by its caller). ``O(N^2)``, all diagonals at
+    once, row by row."""
+    N = diag.shape[0]
     coupling = gamma[:N, None] * gamma[None, :N]  # couples (a, b) with (a-1, b-1)
     piv = np.empty((N, N))
     mult = np.zeros((N, N))
@@ -161,14 +180,9 @@ def laplacian_coefficients(N: int) -> LaplacianCoefficients:
     for r in range(1, N):  # row r, columns 1..N-1: the i-th step of every diagonal's LDL^T
         mult[r, 1:] = coupling[r, 1:] / piv[r - 1, :-1]
         piv[r, 1:] = diag[r, 1:] - mult[r, 1:] * coupling[r, 1:]
-    with np.errstate(divide="ignore"):  # the last pivot below may round to exactly 0
+    with np.errstate(divide="ignore"):  # the Laplacian's last pivot may round to exactly 0
         inv_piv = 1.0 / piv
-    # The main diagonal's block has the identity in its kernel: its last pivot is zero up to
-    # rounding and is not used (the solve pins that entry and removes the mean afterwards).
-    inv_piv[N - 1, N - 1] = 0.0
-    for arr in (diag, gamma, inv_piv, mult):
-        arr.setflags(write=False)
-    return LaplacianCoefficients(N=N, diag=diag, gamma=gamma, inv_piv=inv_piv, mult=mult)
+    return inv_piv, mult
 
 
 def as_matrices(W: ArrayLike, what: str) -> tuple[Array, tuple[int, ...], int]:

@@ -30,15 +30,30 @@ entry ``(a, b)`` to ``(a-1, b-1)`` and ``inv_piv[a, b]`` the inverse pivot of en
 
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from .._compiled.stages.split import provide_flow
+
+#: Reassociation for the symmetric products (reductions and updates vectorize).
+_FM = {"reassoc", "nsz", "contract"}
 
 __all__ = [
+    "SphereFlow",
+    "dissipate",
+    "euler_double_bracket_field",
     "euler_field",
+    "helmholtz_solve",
+    "helmholtz_solve_batch",
     "laplacian_apply",
     "laplacian_apply_batch",
     "mhd_field",
     "poisson_solve",
     "poisson_solve_batch",
+    "qg_field",
 ]
 
 
@@ -99,16 +114,32 @@ def poisson_solve(W, out, inv_piv, mult):  # type: ignore[no-untyped-def]
     tr = 0.0j
     for a in range(N):
         tr += W[a, a]
+    shift = np.full(N, tr / N)
+    _sweeps(W, shift, out, inv_piv, mult)
+    # make the main diagonal traceless (removes the arbitrary kernel component)
+    tr = 0.0j
+    for a in range(N):
+        tr += out[a, a]
     mean = tr / N
-    # forward sweep, row by row: z[a, b] = y[a, b] - mult[a, b] z[a-1, b-1], y = W - mean I
+    for a in range(N):
+        out[a, a] -= mean
+
+
+@numba.njit(cache=True, inline="always")
+def _sweeps(W, shift, out, inv_piv, mult):  # type: ignore[no-untyped-def]
+    """``out`` solving every diagonal's tridiagonal system for the right-hand side ``W`` minus
+    ``diag(shift)`` (the factorization in position: forward then backward sweep, row by row,
+    all diagonals at once)."""
+    N = W.shape[0]
+    # forward sweep, row by row: z[a, b] = y[a, b] - mult[a, b] z[a-1, b-1], y = W - diag(shift)
     for b in range(N):
         out[0, b] = W[0, b]
-    out[0, 0] -= mean
+    out[0, 0] -= shift[0]
     for a in range(1, N):
         out[a, 0] = W[a, 0]
         for b in range(1, a):
             out[a, b] = W[a, b] - mult[a, b] * out[a - 1, b - 1]
-        out[a, a] = (W[a, a] - mean) - mult[a, a] * out[a - 1, a - 1]
+        out[a, a] = (W[a, a] - shift[a]) - mult[a, a] * out[a - 1, a - 1]
         for b in range(a + 1, N):
             out[a, b] = W[a, b] - mult[a, b] * out[a - 1, b - 1]
     # backward sweep: x[a, b] = z[a, b] inv_piv[a, b] - mult[a+1, b+1] x[a+1, b+1]
@@ -118,13 +149,44 @@ def poisson_solve(W, out, inv_piv, mult):  # type: ignore[no-untyped-def]
         for b in range(N - 1):
             out[a, b] = out[a, b] * inv_piv[a, b] - mult[a + 1, b + 1] * out[a + 1, b + 1]
         out[a, N - 1] *= inv_piv[a, N - 1]
-    # make the main diagonal traceless (removes the arbitrary kernel component)
+
+
+@numba.njit(cache=True)
+def helmholtz_solve(W, out, inv_piv, mult, shift):  # type: ignore[no-untyped-def]
+    r"""``out = A^{-1}(W - \mathrm{diag}(\text{shift}))`` for an operator ``A`` with
+    :math:`\Delta_N`'s structure whose every diagonal block is definite (the quasi-geostrophic
+    :math:`\Delta_N - \kappa^2 - F\,\tfrac12\{Z^2, \cdot\}`; ``inv_piv``, ``mult`` from
+    :func:`isoflow.sphere.factor_diagonals`). ``O(N^2)``: two sweeps, as
+    :func:`poisson_solve`, without its trace handling (the trace is part of the solution)."""
+    _sweeps(W, shift, out, inv_piv, mult)
+
+
+@numba.njit(cache=True)
+def qg_field(W, out, inv_piv, mult, inv_hbar, planetary):  # type: ignore[no-untyped-def]
+    r"""The quasi-geostrophic ``B(Q) = \Psi_0/\hbar``: :math:`A\Psi = Q_0 - F` for the traceless
+    part :math:`Q_0` of ``Q`` (``planetary`` the diagonal of the planetary vorticity ``F``),
+    :math:`\Psi_0` the traceless part of :math:`\Psi` (:func:`helmholtz_solve`): the
+    ``f(W, out, *args)`` of :func:`isoflow.models.qg_sphere`'s kernel.
+
+    The model's states have zero mean potential vorticity (a Casimir); the trace IsoMP's stage
+    carries (``O(h^2)``) is ignored, as Euler's field ignores it, and the trace of
+    :math:`\Psi` (it commutes with everything, but would rescale the Cayley map's step) is
+    removed: the step tends to Euler's as ``F, kappa -> 0``."""
+    N = W.shape[0]
+    tr = 0.0j
+    for a in range(N):
+        tr += W[a, a]
+    shift = planetary + tr / N
+    _sweeps(W, shift, out, inv_piv, mult)
     tr = 0.0j
     for a in range(N):
         tr += out[a, a]
     mean = tr / N
     for a in range(N):
         out[a, a] -= mean
+    for a in range(N):
+        for b in range(N):
+            out[a, b] *= inv_hbar
 
 
 @numba.njit(cache=True)
@@ -143,6 +205,27 @@ def euler_field(W, out, inv_piv, mult, inv_hbar, shift):  # type: ignore[no-unty
         for b in range(N):
             out[a, b] *= inv_hbar
         out[a, a] += shift[a]
+
+
+@numba.njit(cache=True)
+def euler_double_bracket_field(W, out, inv_piv, mult, inv_hbar, shift, hbar, alpha):  # type: ignore[no-untyped-def]
+    r"""The Euler field with selective decay: :math:`B = \Psi/\hbar - \alpha[\Psi, W]` with the
+    relative stream matrix :math:`\Psi = P + \hbar\,\mathrm{diag}(\text{shift})`,
+    :math:`\Delta_N P = W` (:func:`euler_field` for ``alpha = 0``).
+
+    :math:`\dot W = [B, W]` then adds :math:`-\alpha[[\Psi, W], W]` to Zeitlin's flow: still
+    isospectral (every Casimir kept), while the energy decreases at the rate
+    :math:`\frac{4\pi}{N}\alpha\|[\Psi, W]\|_F^2` (``docs/theory/forced.rst``). Two matrix
+    products per evaluation (BLAS).
+    """
+    poisson_solve(W, out, inv_piv, mult)
+    N = W.shape[0]
+    for a in range(N):
+        out[a, a] += hbar * shift[a]
+    C = np.dot(out, W) - np.dot(W, out)
+    for a in range(N):
+        for b in range(N):
+            out[a, b] = out[a, b] * inv_hbar - alpha * C[a, b]
 
 
 @numba.njit(cache=True)
@@ -170,7 +253,110 @@ def laplacian_apply_batch(W, out, diag, gamma):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
+def helmholtz_solve_batch(W, out, inv_piv, mult, shift):  # type: ignore[no-untyped-def]
+    """:func:`helmholtz_solve` on every member of stacked ``(M, N, N)`` matrices."""
+    for k in range(W.shape[0]):
+        helmholtz_solve(W[k], out[k], inv_piv, mult, shift)
+
+
+@numba.njit(cache=True)
 def poisson_solve_batch(W, out, inv_piv, mult):  # type: ignore[no-untyped-def]
     """:func:`poisson_solve` on every member of stacked ``(M, N, N)`` matrices."""
     for k in range(W.shape[0]):
         poisson_solve(W[k], out[k], inv_piv, mult)
+
+
+# ---- the exact flow of the dissipation, diagonal by diagonal ----------------------------------
+
+
+class SphereFlow(NamedTuple):
+    """The per-diagonal flow of :class:`isoflow.sphere.SphereDissipation` for the half steps of
+    a run: ``data[j]`` the upper triangles of every diagonal's even and odd folded matrices for
+    half step ``j``, at the offsets ``offe[m]``, ``offo[m]`` of diagonal ``m``."""
+
+    N: int
+    data: NDArray[Any]
+    offe: NDArray[np.int64]
+    offo: NDArray[np.int64]
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _symmetric_product(P, off, k, xr, xi, yr, yi):  # type: ignore[no-untyped-def]
+    """``y = M x`` for the symmetric ``k x k`` matrix ``M`` stored as its upper triangle, row
+    by row, at ``P[off:]``, and a complex ``x`` given by its real and imaginary parts (each
+    entry of ``M`` read once, used for both of its positions and both parts: real loops that
+    vectorize)."""
+    for i in range(k):
+        yr[i] = 0.0
+        yi[i] = 0.0
+    o = off
+    for i in range(k):
+        xri = xr[i]
+        xii = xi[i]
+        d = P[o]
+        accr = d * xri
+        acci = d * xii
+        base = o - i
+        for j in range(i + 1, k):
+            mij = P[base + j]
+            accr += mij * xr[j]
+            acci += mij * xi[j]
+            yr[j] += mij * xri
+            yi[j] += mij * xii
+        o += k - i
+        yr[i] += accr
+        yi[i] += acci
+
+
+@numba.njit(cache=True)
+def dissipate(W, data, offe, offo):  # type: ignore[no-untyped-def]
+    r"""``W = f(-\Delta_N) W`` in place for one ``(N, N)`` skew-Hermitian matrix, with the
+    folded matrices of :class:`isoflow.sphere.SphereDissipation` (``data``: one half step's).
+
+    On diagonal ``m`` (entries ``(i + m, i)``, ``n = N - m`` of them): sums
+    :math:`a_i = x_i + x_{n-1-i}` and differences :math:`b_i = x_i - x_{n-1-i}` (real and
+    imaginary parts apart), their products with the even and odd matrices, back; the diagonal
+    ``-m`` is then the mirror :math:`W_{i, i+m} = -\overline{W_{i+m, i}}` (exactly what the
+    product would give).
+    """
+    N = W.shape[0]
+    half = (N + 1) // 2
+    ar = np.empty(half)
+    ai = np.empty(half)
+    br = np.empty(half)
+    bi = np.empty(half)
+    yar = np.empty(half)
+    yai = np.empty(half)
+    ybr = np.empty(half)
+    ybi = np.empty(half)
+    for m in range(N):
+        n = N - m
+        h2 = n // 2
+        odd = n - 2 * h2
+        for p in range(h2):
+            x1 = W[p + m, p]
+            x2 = W[n - 1 - p + m, n - 1 - p]
+            ar[p] = x1.real + x2.real
+            ai[p] = x1.imag + x2.imag
+            br[p] = x1.real - x2.real
+            bi[p] = x1.imag - x2.imag
+        if odd:
+            ar[h2] = W[h2 + m, h2].real
+            ai[h2] = W[h2 + m, h2].imag
+        _symmetric_product(data, offe[m], h2 + odd, ar, ai, yar, yai)
+        _symmetric_product(data, offo[m], h2, br, bi, ybr, ybi)
+        for p in range(h2):
+            W[p + m, p] = complex(yar[p] + ybr[p], yai[p] + ybi[p])
+            W[n - 1 - p + m, n - 1 - p] = complex(yar[p] - ybr[p], yai[p] - ybi[p])
+        if odd:
+            W[h2 + m, h2] = complex(yar[h2], yai[h2])
+        if m:
+            for i in range(n):
+                W[i, i + m] = -W[i + m, i].conjugate()
+
+
+@provide_flow(SphereFlow)
+@numba.njit(cache=True)
+def _sphere_flow(flow, W, j):  # type: ignore[no-untyped-def]
+    N = flow.N
+    dissipate(W.reshape((N, N)), flow.data[j], flow.offe, flow.offo)

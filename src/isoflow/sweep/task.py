@@ -280,8 +280,13 @@ def _resumed(spec: SweepSpec, task: Task, paths: TaskPaths, problem: Any, method
             chunk_rows=spec.chunk_rows,
             flush_seconds=spec.flush_seconds,
         )
-    except ModelChangedError:
-        raise  # the sweep's other tasks ran the recorded model: not started again
+    except ModelChangedError as exc:  # the sweep's other tasks ran the recorded model
+        raise ModelChangedError(
+            f"{paths.h5}: the model changed since this task started ({'; '.join(exc.changes)}); "
+            "resuming would mix two models in one task: restore the model, or delete this "
+            "file to run the task again from its start with this one",
+            changes=exc.changes,
+        ) from exc
     except (IsoflowError, OSError) as exc:  # no checkpoint, unreadable file
         _log(paths.log, f"cannot resume ({exc}); starting again")
         return None

@@ -5,17 +5,18 @@ blocks (:mod:`isoflow._compiled.blocks`) with the interface of the one driver
 (:mod:`isoflow._compiled.driver`)::
 
     iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr)   # G = G(X), rr per lane
-    finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin)  # the new state, fin per lane
+    finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)  # the new state, fin per lane
     begin(f, fargs, lay, mp, sd, W, h)                          # optional explicit part
 
 ``f, fargs`` are the kernel's field, ``lay`` the layout record, ``mp`` the method's parameters
 (a tuple, :attr:`CompiledStage.params`), ``sd`` the unit's step data ``(L, D)`` (e.g. noise
-increments; ``D = 0`` for most methods), ``h`` the (sub)step, ``work`` the scratch rows. A
-method joins the compiled paths by one call of :func:`register`; a layout that needs a fused
-evaluation of a stage for speed gets a named :class:`Specialization` (with the benchmark that
-justifies it). A stage runs on every layout that provides the blocks it :attr:`needs
-<CompiledStage.needs>`; compositions of the method (:class:`isoflow.Composition`) run it
-substep by substep.
+increments; ``D = 0`` for most methods), ``h`` the (sub)step, ``work`` the scratch rows,
+``E`` the compensation of the update (empty when the method does not compensate; see
+:attr:`CompiledStage.compensated`). A method joins the compiled paths by one call of
+:func:`register`; a layout that needs a fused evaluation of a stage for speed gets a named
+:class:`Specialization` (with the benchmark that justifies it). A stage runs on every layout
+that provides the blocks it :attr:`needs <CompiledStage.needs>`; compositions of the method
+(:class:`isoflow.Composition`) run it substep by substep.
 """
 
 from __future__ import annotations
@@ -24,12 +25,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ...methods import IsoMP, SphericalMidpoint
+from ...methods import IsoMP, SphericalMidpoint, Strang
+from ...methods._base import StepDataRequest
+from ...splitting import data_widths
 from .. import dense_planar, dense_tiles, spin_chain
 from ..dense import DenseBlas
 from ..layout import Layout
 from ..spin_chain import SpinChain
-from . import isomp, spherical_midpoint
+from . import isomp, spherical_midpoint, split
 
 __all__ = [
     "CompiledStage",
@@ -78,20 +81,16 @@ def _no_offsets(method: Any) -> int:
     return 0
 
 
-def _no_params(method: Any, problem: Any) -> tuple[Any, ...]:
+def _no_params(method: Any, problem: Any, steps: tuple[float, ...]) -> tuple[Any, ...]:
     return ()
 
 
-@dataclass(frozen=True)
-class StepDataRequest:
-    """What a stage's step data is for: the steps ``k0 + 1 .. k0 + nsteps`` of the members
-    ``members`` (their indices in the run, flattened; ``-1`` for the padding lanes of the last
-    unit), with step ``h``."""
+def _always(*args: Any) -> bool:
+    return True
 
-    k0: int
-    nsteps: int
-    members: Any
-    h: float
+
+def _not_compensated(method: Any) -> bool:
+    return False
 
 
 @dataclass(frozen=True)
@@ -112,7 +111,8 @@ class CompiledStage:
         solve starts from the state). The method state is then ``(h, D_1, D_2, ...)``, newest
         first, as :class:`isoflow.IsoMP` keeps it.
     params : callable
-        ``(method, problem) -> tuple``: the method's parameters as the stage reads them.
+        ``(method, problem, steps) -> tuple``: the method's parameters as the stage reads them,
+        for a run whose substeps have the lengths ``steps`` (one, unless composed).
     begin : numba dispatcher or None
         An explicit part before each solve (a split step), or none.
     step_data : callable or None
@@ -122,6 +122,16 @@ class CompiledStage:
         chunk (:class:`StepDataRequest`). ``None``: the stage reads none (``D = 0``). It must
         depend only on the method, the problem, the step and the member, never on how a run is
         cut into chunks, so that a resumed or split run draws the same data.
+    applies : callable
+        ``(method, problem, composed) -> bool``: whether the stage runs this method on this
+        problem (e.g. the split stage runs ``Strang(IsoMP())`` only, and not composed when
+        its step data belong to whole steps).
+    accepts : callable
+        ``layout -> bool``: whether the stage runs on a layout (beyond the blocks it needs).
+    compensated : callable
+        ``method -> bool``: whether the method compensates its update (the driver then
+        keeps a compensation per unit and substep position, and the method state carries
+        it, :func:`isoflow.methods.isomp.pack_state`).
     specializations : dict
         Layout record class -> :class:`Specialization`.
     """
@@ -132,13 +142,18 @@ class CompiledStage:
     needs: frozenset[str]
     nwork: int
     offsets: Callable[[Any], int] = _no_offsets
-    params: Callable[[Any, Any], tuple[Any, ...]] = _no_params
+    params: Callable[[Any, Any, tuple[float, ...]], tuple[Any, ...]] = _no_params
     begin: Any = None
     step_data: Callable[[Any, Any, StepDataRequest], Any] | None = None
+    compensated: Callable[[Any], bool] = _not_compensated
+    applies: Callable[[Any, Any, bool], bool] = _always
+    accepts: Callable[[Layout], bool] = _always
     specializations: dict[type, Specialization] = field(default_factory=dict)
 
     def on(self, layout: Layout) -> StageOnLayout | None:
         """The stage's functions on ``layout``, or ``None`` if it lacks a block."""
+        if not self.accepts(layout):
+            return None
         spec = self.specializations.get(type(layout.record))
         if spec is not None:
             it, fin = spec.choose(layout)
@@ -191,6 +206,7 @@ register(
         frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
         isomp.NWORK,
         offsets=_isomp_offsets,
+        compensated=lambda method: bool(method.compensated),
         specializations={
             DenseBlas: Specialization(
                 _dense_blas_isomp,
@@ -220,6 +236,39 @@ register(
                 spin_chain.spherical_sweeps,
                 1,
                 "benchmark 5: fused memory sweeps",
+            ),
+        },
+    ),
+)
+
+
+def _split_applies(method: Strang, problem: Any, composed: bool) -> bool:
+    """``Strang(IsoMP())``; composed only when its step data are empty (steady forcing)."""
+    if type(method.base) is not IsoMP:
+        return False
+    return not composed or sum(data_widths(problem)) == 0
+
+
+register(
+    Strang,
+    CompiledStage(
+        "Strang split",
+        isomp.iterate,
+        split.finish,
+        frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
+        isomp.NWORK,
+        offsets=lambda method: _isomp_offsets(method.base),
+        params=split.params,
+        begin=split.begin,
+        step_data=lambda method, problem, request: method.step_data(problem, request),
+        compensated=lambda method: bool(method.base.compensated),
+        applies=_split_applies,
+        accepts=lambda layout: layout.lanes == 1 and layout.identity,
+        specializations={
+            DenseBlas: Specialization(
+                lambda layout: (dense_tiles.iterate, split.finish_tiles),
+                dense_tiles.NWORK,
+                "IsoMP's (benchmarks 3, 10, 12); the split step's cost: benchmark 15",
             ),
         },
     ),

@@ -37,6 +37,6 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[n
 
 
 @numba.njit(cache=True)
-def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin):  # type: ignore[no-untyped-def]
+def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = Pi_V(W + h [B, X])`` from the bracket of the last iteration."""
-    blocks.advance_state(lay, W, h, aux, Wn, fin)
+    blocks.advance_state(lay, W, h, aux, E, Wn, fin)

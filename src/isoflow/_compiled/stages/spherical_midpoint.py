@@ -38,6 +38,6 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[n
 
 
 @numba.njit(cache=True)
-def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin):  # type: ignore[no-untyped-def]
+def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(m) x m`` from the last iteration."""
-    blocks.advance_state(lay, W, h, aux, Wn, fin)
+    blocks.advance_state(lay, W, h, aux, E, Wn, fin)

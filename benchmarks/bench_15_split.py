@@ -1,0 +1,83 @@
+"""Benchmark 15: the split step's overhead on the sphere, N = 256, 512, 1024.
+
+Euler on the sphere with viscosity, hyperviscosity ``(nu_p, 2)``, drag and a steady forcing,
+stepped by the Strang split step ``S_{h/2} o IsoMP_h o S_{h/2}`` (:class:`isoflow.Strang`, the
+compiled split stage on the BLAS layout), against the ideal IsoMP step on the same initial
+state with ``h |B| = 0.3`` (as benchmarks 12 and 13), timed alternately. A half step applies
+the exact flow of the dissipation per diagonal (``sum_m (N - m)^2 / 2`` real multiply-adds per
+part of the complex entries, :mod:`isoflow.sphere.compiled`) and the forcing's few nonzero
+entries: in flops a small fraction of the two complex ``N x N`` products of each of IsoMP's
+iterations. The iterations per step are reported too; the ratio per iteration is the cost of
+the split itself.
+
+Measured (N = 256, machine shared): 1.19, not met. The half step reads the matrix diagonal by
+diagonal, a cache miss per entry (about 20 ms a half step at N = 256, as long as a complex
+product); a blocked gather of the diagonals (row-major tiles) is the known next step.
+Target: time per step, split / ideal, at most 1.10. Run alone:
+``python benchmarks/bench_15_split.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+
+from suite import StepTimer, benchmark, paired_best_times, record
+
+#: The issue's bound on the split step's cost against the ideal step.
+TARGET = 1.10
+
+
+def _problems(N: int) -> tuple[Any, Any, Any]:
+    """``(ideal, split, W0)``: the same initial vorticity, without and with the split parts."""
+    import isoflow as iso
+
+    ideal, W0 = iso.models.euler_sphere(N=N, seed=1)
+    F = 0.1 * iso.sphere.from_coefficients(iso.sphere.to_coefficients(W0, lmax=4), N)
+    split, _ = iso.models.euler_sphere(
+        N=N, seed=1, viscosity=1e-4, hyperviscosity=(1e-12, 2), drag=1e-3, forcing=F
+    )
+    return ideal, split, W0
+
+
+@benchmark(15, "split step (viscous, hyperviscous, forced) / ideal IsoMP step on the sphere")
+def run(quick: bool) -> list[dict[str, Any]]:
+    import isoflow as iso
+
+    out = []
+    for N in (128, 256) if quick else (256, 512, 1024):
+        ideal, split, W0 = _problems(N)
+        h = float(0.3 / np.linalg.norm(ideal.B(W0), 2))  # h |B| = 0.3, as benchmarks 12, 13
+        n = 2 if N >= 512 else 4
+        a = StepTimer(ideal, iso.IsoMP(), W0, h)
+        b = StepTimer(split, iso.Strang(), W0, h)
+        its: dict[str, int] = {}
+
+        def step_ideal(a: Any = a, n: int = n, its: dict[str, int] = its) -> None:
+            its["ideal"] = a.advance(n)
+
+        def step_split(b: Any = b, n: int = n, its: dict[str, int] = its) -> None:
+            its["split"] = b.advance(n)
+
+        t_split, t_ideal = paired_best_times(step_split, step_ideal, repeats=3)
+        ratio = t_split / t_ideal
+        per_it = (t_split / its["split"]) / (t_ideal / its["ideal"])
+        out.append(
+            record(
+                15, f"N = {N}: split step / ideal IsoMP step",
+                split_ms_per_step=t_split / n * 1e3, ideal_ms_per_step=t_ideal / n * 1e3,
+                iterations_per_step={"split": its["split"] / n, "ideal": its["ideal"] / n},
+                ratio_per_iteration=per_it, runner=b.label,
+                metric="time ratio per step (split / ideal)", value=ratio,
+                target=f"<= {TARGET}", met=ratio <= TARGET,
+            )
+        )  # fmt: skip
+    return out
+
+
+if __name__ == "__main__":
+    import run_all
+
+    sys.exit(run_all.main(["--only", "15", *sys.argv[1:]]))

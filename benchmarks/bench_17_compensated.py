@@ -1,0 +1,65 @@
+"""Benchmark 17: compensated summation in IsoMP's update, on against off, time per step.
+
+``iso.IsoMP(compensated=True)`` (the default) carries the rounding error of
+``W_{k+1} = W_k + h C`` to the next step (an exact TwoSum per entry and a compensation buffer
+of the state's size, :mod:`isoflow.methods.isomp`); ``compensated=False`` is the plain update.
+Both runs take the same steps (the same solves to rounding), timed alternately in the compiled
+loop: the so(10) rigid body (the written-out dense layout, one system) and Euler on the sphere
+at ``N = 256`` (the BLAS layout with its fused finish). Target: ratio <= 1.05 (the issue's
+bound above which the compensation would have to be opt-in). Run alone:
+``python benchmarks/bench_17_compensated.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+from suite import StepTimer, benchmark, paired_best_times, record
+
+#: The issue's bound on the cost of the compensation per step.
+TARGET = 1.05
+
+
+def _ratio(prob: Any, W0: Any, h: float, n: int) -> tuple[float, float, str]:
+    """``(t_on, t_off, runner)``: best seconds per step with and without compensation."""
+    import isoflow as iso
+
+    on = StepTimer(prob, iso.IsoMP(compensated=True), W0, h)
+    off = StepTimer(prob, iso.IsoMP(compensated=False), W0, h)
+    t_on, t_off = paired_best_times(lambda: on.advance(n), lambda: off.advance(n))
+    return t_on / n, t_off / n, on.label
+
+
+@benchmark(17, "compensated summation on / off, time per step: so(10) and the N = 256 sphere")
+def run(quick: bool) -> list[dict[str, Any]]:
+    import isoflow as iso
+
+    cases = [
+        ("so(10) rigid body, one system", *iso.models.rigid_body(10), 0.1, 500 if quick else 4000),
+        (
+            "Euler on the sphere, N = 256",
+            *iso.models.euler_sphere(N=128 if quick else 256, seed=1),
+            0.05,
+            2 if quick else 5,
+        ),
+    ]
+    out = []
+    for what, prob, W0, h, n in cases:
+        t_on, t_off, label = _ratio(prob, W0, h, n)
+        ratio = t_on / t_off
+        out.append(
+            record(
+                17, f"{what}: compensated / plain update, per step",
+                compensated_us_per_step=t_on * 1e6, plain_us_per_step=t_off * 1e6,
+                runner=label, metric="time ratio (compensated / plain)", value=ratio,
+                target=f"<= {TARGET}", met=ratio <= TARGET,
+            )
+        )  # fmt: skip
+    return out
+
+
+if __name__ == "__main__":
+    import run_all
+
+    sys.exit(run_all.main(["--only", "17", *sys.argv[1:]]))

@@ -1,0 +1,193 @@
+r"""The Strang split step: a method for the isospectral part between two half steps of the
+linear part and the forcing (:mod:`isoflow.splitting` has the equations).
+
+.. math::
+
+    \Phi_h = S_{h/2} \circ \Psi_h \circ S_{h/2}, \qquad
+    S_\tau(W) = e^{\tau L} W + \sum_j a_j(t_{1/2}) \int_0^\tau e^{sL} F_j\,ds
+        + \sum_j \sigma_j \sqrt{\tfrac{1 - e^{-2c_j\tau}}{2c_j}}\;\xi_j\, e_j ,
+
+with :math:`t_{1/2}` the midpoint of the half step and :math:`\xi_j` standard normals (the
+step data of the step, :meth:`Strang.step_data`: the same in the NumPy and the compiled path,
+and in a resumed run). The method state is the base method's; the step data depend on the step
+and the member alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._errors import ParameterError
+from ..noise import gaussian_increments
+from ..problems import IsospectralProblem
+from ..splitting import FORCING_STREAM, HalfStep, data_widths, half_step, split_terms
+from ._base import Method, StepDataRequest, StepResult
+from .isomp import IsoMP
+
+__all__ = ["Strang"]
+
+Array = NDArray[Any]
+
+
+@dataclass(frozen=True)
+class Strang(Method):
+    r"""Strang splitting of a problem's linear part and forcing with a method for its
+    isospectral part (second order, symmetric when the base is).
+
+    Parameters
+    ----------
+    base : Method
+        The method for :math:`\dot W = [B(W), W]` (default :class:`~isoflow.IsoMP`). With
+        IsoMP and the fixed-point solver the split step runs compiled wherever IsoMP does
+        (dense spaces; on the others through the NumPy path).
+
+    Notes
+    -----
+    A problem without linear part and forcing is stepped by the base method alone, bit for bit.
+    A :class:`~isoflow.Composition` of the split step raises its order for deterministic,
+    steady forcing; with time-dependent amplitudes or noise the step data belong to whole
+    steps, so such a composition is refused.
+
+    Examples
+    --------
+    >>> import isoflow as iso
+    >>> prob, W0 = iso.models.euler_sphere(N=8, seed=1, viscosity=1e-3, drag=0.01)
+    >>> sol = iso.solve(prob, iso.Strang(), W0, dt=0.1, n_steps=10)
+    >>> sol.method
+    'Strang(IsoMP)'
+    """
+
+    base: Method = field(default_factory=IsoMP)
+    _cache: dict[float, tuple[IsospectralProblem, HalfStep]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+
+    reads_step_data: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.base, Method):
+            raise ParameterError(
+                f"Strang: base must be a Method such as iso.IsoMP(), got {self.base!r}"
+            )
+        if isinstance(self.base, Strang):
+            raise ParameterError("Strang: the base is already a split method")
+
+    # ---- the Method attributes that depend on the instance ----------------------------------
+    @property  # type: ignore[misc]
+    def order(self) -> int:  # type: ignore[override]
+        return min(int(self.base.order), 2)
+
+    @property  # type: ignore[misc]
+    def implicit(self) -> bool:  # type: ignore[override]
+        return bool(self.base.implicit)
+
+    @property  # type: ignore[misc]
+    def symmetric(self) -> bool:  # type: ignore[override]
+        return bool(getattr(self.base, "symmetric", False))
+
+    @property  # type: ignore[misc]
+    def name(self) -> str:  # type: ignore[override]
+        return f"Strang({self.base.name})"
+
+    @property
+    def solver(self) -> Any:
+        """The base method's nonlinear solver (``None`` for an explicit base)."""
+        return getattr(self.base, "solver", None)
+
+    # ---- stepping -----------------------------------------------------------------------------
+    def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
+        return self.base.init(problem, y0, h)
+
+    def half(self, problem: IsospectralProblem, tau: float) -> HalfStep:
+        """The forcing terms of a half step ``tau`` (computed once per problem and step)."""
+        hit = self._cache.get(tau)
+        if hit is not None and hit[0] is problem:
+            return hit[1]
+        terms = half_step(problem, tau)
+        self._cache[tau] = (problem, terms)
+        return terms
+
+    def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
+        """``(nsteps, members, 2 (R_d + R_s))``: per half step the time-dependent amplitudes
+        at its midpoint, then the standard normals of its noise modes (first half, second
+        half; :func:`isoflow.splitting.data_widths`)."""
+        rd, rs = data_widths(problem)
+        members = np.asarray(request.members, dtype=np.int64).reshape(-1)
+        n, h = int(request.nsteps), float(request.h)
+        out = np.zeros((n, members.size, 2 * (rd + rs)))
+        if rd:
+            det, _ = split_terms(problem)
+            for s in range(n):
+                t = request.t0 + (request.k0 + s) * h
+                for half, tm in enumerate((t + 0.25 * h, t + 0.75 * h)):
+                    a = np.concatenate(
+                        [f.amplitudes(tm, len(P)) for f, P in det if f.time_dependent]
+                    )
+                    out[s, :, half * (rd + rs) : half * (rd + rs) + rd] = a
+        if rs:
+            _, sto = split_terms(problem)
+            col = 0
+            for f, modes, _ in sto:
+                r = modes.size
+                xi = gaussian_increments(
+                    int(f.seed), members, request.k0, n, 2 * r, 1.0, stream=FORCING_STREAM
+                )
+                out[:, :, rd + col : rd + col + r] = xi[:, :, :r]
+                out[:, :, 2 * rd + rs + col : 2 * rd + rs + col + r] = xi[:, :, r:]
+                col += r
+        return out
+
+    def _half_step(
+        self, problem: IsospectralProblem, W: Array, tau: float, data: Array | None
+    ) -> Array:
+        """:math:`S_\\tau(W)` with the half step's step data ``data`` (``(*batch, R_d + R_s)``)."""
+        lin = problem.linear_part
+        if lin is not None:
+            W = lin.flow(W, tau)
+        terms = self.half(problem, tau)
+        if terms.steady is not None:
+            W = W + terms.steady
+        rd = 0 if terms.responses is None else len(terms.responses)
+        for patterns, cols in ((terms.responses, slice(0, rd)), (terms.noise, slice(rd, None))):
+            if patterns is None:
+                continue
+            assert data is not None
+            W = W + np.tensordot(data[..., cols], patterns, axes=(-1, 0))
+        return W
+
+    def step(
+        self,
+        problem: IsospectralProblem,
+        y: Array,
+        h: float,
+        state: Any = None,
+        data: Array | None = None,
+    ) -> StepResult:
+        if problem.linear_part is None and not problem.forcing:
+            return self.base.step(problem, y, h, state)
+        rd, rs = data_widths(problem)
+        if rd + rs and data is None:
+            raise ParameterError(
+                f"{self.name}: the forcing has time-dependent amplitudes or noise, which are "
+                "read per whole step (step data): step it through iso.solve, not inside a "
+                "composition"
+            )
+        half = rd + rs
+        first = None if data is None else data[..., :half]
+        second = None if data is None else data[..., half:]
+        tau = 0.5 * h
+        y1 = self._half_step(problem, y, tau, first)
+        res = self.base.step(problem, y1, h, state)
+        y2 = self._half_step(problem, res.y, tau, second)
+        return StepResult(
+            y=y2,
+            stage=res.stage,
+            iterations=res.iterations,
+            residual=res.residual,
+            status=res.status,
+            state=res.state,
+        )

@@ -1,0 +1,270 @@
+"""Dissipation and forcing as a Strang split step (issue 21, items 1 and 2).
+
+The exact linear step, the split step's limits (``B = 0`` exact, ``L = 0`` IsoMP bit for bit),
+its order, the budgets, the double bracket, the noise (Ornstein–Uhlenbeck) and the errors of bad
+input, on the NumPy and the compiled paths.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+from isoflow.sphere import SphereDissipation, basis_matrix, degree_rates
+
+N = 7
+TAU = 0.37
+
+
+def _numpy(problem: iso.IsospectralProblem) -> iso.IsospectralProblem:
+    return dataclasses.replace(problem, kernel=None)
+
+
+def _rates() -> np.ndarray:
+    return degree_rates(N, viscosity=0.3, hyperviscosity=(0.01, 2), drag=0.1)
+
+
+def test_linear_step_decays_every_harmonic_exactly() -> None:
+    """``exp(tau L) T_lm = exp(-tau c_l) T_lm`` for every ``(l, m)``, in NumPy and in the
+    compiled per-diagonal kernel (both diagonals parities, odd and even lengths)."""
+    from isoflow.sphere.compiled import dissipate
+
+    c = _rates()
+    part = SphereDissipation(N, c)
+    flow = part.compiled([TAU], iso.algebras.su(N))
+    worst = 0.0
+    for deg in range(1, N):
+        for m in range(-deg, deg + 1):
+            T = 1j * basis_matrix(N, deg, m)
+            exact = np.exp(-TAU * c[deg]) * T
+            W = T.copy()
+            dissipate(W, flow.data[0], flow.offe, flow.offo)
+            worst = max(worst, float(np.abs(part.flow(T, TAU) - exact).max()))
+            worst = max(worst, float(np.abs(W - exact).max()))
+    assert worst < 5e-15
+
+
+def _zero_B_problem(forcing: Any) -> tuple[iso.IsospectralProblem, np.ndarray]:
+    alg = iso.algebras.su(N)
+    prob = iso.IsospectralProblem(
+        algebra=alg,
+        kernel=iso.ElementwiseLinear(np.zeros((N, N))),
+        linear_part=SphereDissipation(N, _rates()),
+        forcing=forcing,
+    )
+    return prob, alg.random(seed=1)
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_split_step_with_B_zero_is_the_exact_flow(compiled: bool) -> None:
+    """``W(t) = e^{tL} W_0 + int_0^t e^{sL} F ds``: two half steps compose exactly."""
+    F = iso.algebras.su(N).random(seed=2)
+    prob, W0 = _zero_B_problem(iso.Forcing(F))
+    prob = prob if compiled else _numpy(prob)
+    h, n = 0.2, 10
+    sol = iso.solve(prob, iso.Strang(), W0, dt=h, n_steps=n, save_every=n, progress=False)
+    assert ("compiled" in sol.stats.runner) == compiled
+    part = prob.linear_part
+    assert part is not None
+    exact = part.flow(W0, n * h) + part.integral(F, n * h)
+    assert float(np.abs(sol.ys[-1] - exact).max()) < 1e-13
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_split_step_without_linear_part_is_isomp_bit_for_bit(compiled: bool) -> None:
+    prob, W0 = iso.models.euler_sphere(N=8, seed=3)
+    prob = prob if compiled else _numpy(prob)
+    a = iso.solve(prob, iso.IsoMP(), W0, dt=0.05, n_steps=15, progress=False)
+    b = iso.solve(prob, iso.Strang(), W0, dt=0.05, n_steps=15, progress=False)
+    assert b.stats.runner.startswith(a.stats.runner)
+    assert a.ys.tobytes() == b.ys.tobytes()
+
+
+def test_split_step_is_second_order_on_the_viscous_sphere() -> None:
+    """Log-log slope of the error at ``t = 1`` against a run with a 64 times smaller step."""
+    F = 0.5 * iso.algebras.su(8).random(seed=4)
+    prob, W0 = iso.models.euler_sphere(
+        N=8, seed=5, viscosity=0.05, hyperviscosity=(1e-3, 2), drag=0.2, forcing=F
+    )
+    T = 1.0
+
+    def final(n: int) -> np.ndarray:
+        sol = iso.solve(prob, iso.Strang(), W0, dt=T / n, n_steps=n, save_every=n, progress=False)
+        return sol.ys[-1]
+
+    ref = final(640)
+    ns = np.array([10, 20, 40])
+    errs = np.array([np.linalg.norm(final(n) - ref) for n in ns])
+    slope = -np.polyfit(np.log(ns), np.log(errs), 1)[0]
+    assert 1.9 < slope < 2.1, (slope, errs)
+
+
+def test_energy_budget_closes_to_the_splitting_error() -> None:
+    """``E(T) - E(0) = int (injection - dissipation) dt`` for a steady forcing: the residual
+    is the splitting and quadrature error, ``O(h^2)`` (a quarter when ``h`` halves)."""
+    F = 0.3 * iso.algebras.su(8).random(seed=6)
+    prob, W0 = iso.models.euler_sphere(N=8, seed=7, viscosity=0.02, drag=0.1, forcing=F)
+    T = 2.0
+
+    def residual(n: int) -> float:
+        sol = iso.solve(prob, iso.Strang(), W0, dt=T / n, n_steps=n, progress=False)
+        d = sol.diagnostics
+        assert d.hamiltonian is not None
+        rate = d.invariants["energy_injection"] - d.invariants["energy_dissipation"]
+        gained = float(np.trapezoid(rate, sol.ts))
+        return abs(float(d.hamiltonian[-1] - d.hamiltonian[0]) - gained) / abs(gained)
+
+    r1, r2 = residual(40), residual(80)
+    assert r1 < 1e-3
+    assert 3.0 < r1 / r2 < 5.0
+
+
+def test_transfer_spectrum_sums_to_zero() -> None:
+    """The bracket moves energy between degrees and conserves it."""
+    prob, W0 = iso.models.euler_sphere(N=10, seed=8, viscosity=1e-3)
+    T = prob.invariants["energy_transfer"](W0)
+    assert T.shape == (9,)
+    assert abs(float(T.sum())) < 1e-12 * float(np.abs(T).max())
+    assert float(np.abs(T).max()) > 0
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_double_bracket_keeps_the_spectrum_and_dissipates_energy(compiled: bool) -> None:
+    prob, W0 = iso.models.euler_sphere(N=8, seed=9, double_bracket=0.5, omega=1.0)
+    prob = prob if compiled else _numpy(prob)
+    sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.05, n_steps=60, progress=False)
+    assert ("compiled" in sol.stats.runner) == compiled
+    assert float(np.max(sol.diagnostics.casimir_drift)) < 1e-12
+    H = sol.diagnostics.hamiltonian
+    assert H is not None
+    assert np.all(np.diff(H) < 0)
+    assert H[-1] < 0.9 * H[0]
+
+
+def test_double_bracket_sign_of_the_energy_rate() -> None:
+    """``dE/dt = -(4 pi / N) alpha ||[Psi, W]||^2`` at the initial state (finite difference)."""
+    alpha = 0.3
+    prob, W0 = iso.models.euler_sphere(N=8, seed=10, double_bracket=alpha)
+    plain, _ = iso.models.euler_sphere(N=8, seed=10)
+    H = prob.hamiltonian
+    assert H is not None
+    dW = prob.vector_field(W0) - plain.vector_field(W0)  # the double bracket's tendency
+    eps = 1e-6
+    rate = (float(H(W0 + eps * dW)) - float(H(W0 - eps * dW))) / (2 * eps)
+    P = iso.sphere.solve_poisson(W0)
+    C = P @ W0 - W0 @ P
+    assert rate == pytest.approx(-4 * np.pi / 8 * alpha * float(np.sum(np.abs(C) ** 2)), rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"viscosity": -1e-3}, "viscosity must be >= 0"),
+        ({"drag": float("nan")}, "drag must be finite"),
+        ({"hyperviscosity": (1e-4, 0.5)}, "hyperviscosity order p must be >= 1"),
+        ({"hyperviscosity": 1e-4}, "hyperviscosity must be a pair"),
+        ({"double_bracket": -0.1}, "double_bracket must be finite and >= 0"),
+    ],
+)
+def test_bad_dissipation_is_refused_in_one_line(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(iso.ParameterError, match=message) as info:
+        iso.models.euler_sphere(N=6, **kwargs)
+    assert "\n" not in str(info.value)
+
+
+def test_bad_forcing_is_refused_in_one_line() -> None:
+    with pytest.raises(iso.ParameterError, match=r"band l = 6 \+- 1 must lie in 1..N-1 = 1..5"):
+        iso.sphere.band_forcing(6, 6, 1)
+    with pytest.raises(iso.ParameterError, match="energy_rate must be finite"):
+        iso.sphere.band_forcing(6, 2, 1, energy_rate=float("inf"))
+    bad = iso.StochasticForcing([3, 4], sigma=[1.0, float("nan")])
+    with pytest.raises(iso.NonFiniteError, match="sigma must be finite"):
+        iso.models.euler_sphere(N=6, forcing=bad)
+    outside = np.ones((6, 6))  # Hermitian, not in su(6)
+    with pytest.raises(iso.NotInSpaceError, match="forcing pattern"):
+        iso.models.euler_sphere(N=6, forcing=outside)
+    with pytest.raises(iso.ParameterError, match="forcing must be None, an \\(6, 6\\) matrix"):
+        iso.models.euler_sphere(N=6, forcing="band")
+    with pytest.raises(iso.ParameterError, match="rates must be >= 0"):
+        iso.ModalLinearPart(np.eye(3)[:, None, :] * 0, [-1.0, 0.0, 0.0])
+
+
+def test_a_split_problem_needs_a_split_method() -> None:
+    prob, W0 = iso.models.euler_sphere(N=6, viscosity=1e-3)
+    with pytest.raises(iso.ParameterError, match=r"linear part, which IsoMP does not integrate"):
+        iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=2)
+
+
+def _orthonormal_modes(alg: iso.algebras.Algebra, r: int) -> np.ndarray:
+    """``r`` elements of ``alg`` orthonormal in its pairing (Gram–Schmidt of random ones)."""
+    out: list[np.ndarray] = []
+    for s in range(r):
+        e = np.asarray(alg.random(seed=20 + s))
+        for f in out:
+            e = e - float(alg.inner(f, e)) * f
+        out.append(e / np.sqrt(float(alg.inner(e, e))))
+    return np.stack(out)
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_a_users_linear_part_and_forcing_go_through_the_same_hook(compiled: bool) -> None:
+    """A :class:`~isoflow.ModalLinearPart` in a basis of the user's and a steady forcing on
+    so(4) with ``B = 0``: the split step is the exact flow, per mode ``e^{-c t}`` on the modes
+    and nothing on the rest of the space."""
+    alg = iso.algebras.so(4)
+    E = _orthonormal_modes(alg, 3)
+    rates = np.array([0.5, 2.0, 0.0])
+    part = iso.ModalLinearPart(E, rates)
+    F = 0.7 * E[0] + 0.2 * np.asarray(alg.random(seed=30))
+    prob = iso.IsospectralProblem(
+        algebra=alg,
+        kernel=iso.ElementwiseLinear(np.zeros((4, 4))),
+        linear_part=part,
+        forcing=iso.Forcing(F),
+    )
+    prob = prob if compiled else _numpy(prob)
+    W0 = np.asarray(alg.random(seed=31))
+    h, n = 0.1, 20
+    sol = iso.solve(prob, iso.Strang(), W0, dt=h, n_steps=n, save_every=n, progress=False)
+    assert ("compiled" in sol.stats.runner) == compiled
+    t = n * h
+    coef = lambda X: np.array([float(alg.inner(e, X)) for e in E])  # noqa: E731
+    w0, f = coef(W0), coef(F)
+    phi = np.where(rates > 0, -np.expm1(-rates * t) / np.where(rates > 0, rates, 1.0), t)
+    w_t = np.exp(-rates * t) * w0 + phi * f
+    rest = (W0 - np.tensordot(w0, E, 1)) + t * (F - np.tensordot(f, E, 1))
+    exact = np.tensordot(w_t, E, 1) + rest
+    assert float(np.abs(sol.ys[-1] - exact).max()) < 1e-13
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_a_time_dependent_forcing_is_second_order(compiled: bool) -> None:
+    """``F(t) = cos(3t) F_0`` with drag on the sphere and ``B = 0``: the error of the split step
+    against the exact solution falls as ``h^2`` (amplitudes at the half steps' midpoints)."""
+    alpha = 0.4
+    F0 = iso.algebras.su(N).random(seed=11)
+    forcing = iso.Forcing(F0, amplitude=lambda t: np.cos(3.0 * t))
+    prob = iso.IsospectralProblem(
+        algebra=iso.algebras.su(N),
+        kernel=iso.ElementwiseLinear(np.zeros((N, N))),
+        linear_part=SphereDissipation(N, np.full(N, alpha)),
+        forcing=forcing,
+    )
+    prob = prob if compiled else _numpy(prob)
+    W0 = iso.algebras.su(N).random(seed=12)
+    T = 1.0
+    # w' = -alpha w + cos(3t) f: w(T) = e^{-aT} w0 + int_0^T e^{-a(T-s)} cos(3s) ds f
+    g = (alpha * np.cos(3 * T) + 3 * np.sin(3 * T) - alpha * np.exp(-alpha * T)) / (alpha**2 + 9)
+    exact = np.exp(-alpha * T) * W0 + g * F0
+
+    def error(n: int) -> float:
+        sol = iso.solve(prob, iso.Strang(), W0, dt=T / n, n_steps=n, save_every=n, progress=False)
+        assert ("compiled" in sol.stats.runner) == compiled
+        return float(np.abs(sol.ys[-1] - exact).max())
+
+    e1, e2 = error(20), error(40)
+    assert 3.6 < e1 / e2 < 4.4
