@@ -43,6 +43,9 @@ def _cases() -> dict[str, Callable[[], tuple[iso.IsospectralProblem, np.ndarray,
         "dense BLAS": with_runner(lambda: iso.models.rigid_body(20), "BLAS"),
         "su(N) small": with_runner(lambda: iso.models.euler_sphere(N=8, seed=1), "written-out"),
         "su(N) BLAS tiles": with_runner(lambda: iso.models.euler_sphere(N=40, seed=1), "BLAS"),
+        "su(N) BLAS real planes": with_runner(
+            lambda: iso.models.euler_sphere(N=130, seed=1), "real planes"
+        ),
         "lanes": with_runner(ensemble, "lanes"),
         "spin chain": with_runner(
             lambda: iso.models.heisenberg_chain(N=30, initial="random", seed=1), "spin chain"

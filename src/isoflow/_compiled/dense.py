@@ -40,6 +40,7 @@ from .flat import two_sum
 from .layout import Layout, member_layout
 
 __all__ = [
+    "PLANAR_MIN_N",
     "SMALL_N",
     "DenseBlas",
     "DenseSmall",
@@ -61,6 +62,12 @@ _FM = {"reassoc", "nsz", "contract"}
 _TILE = 32
 #: Target row-block height of its triangular product (a multiple of ``_TILE``).
 _BLOCK = 128
+#: Smallest ``n`` at which complex states run IsoMP in real planes with three real products per
+#: complex one (:mod:`.dense_planar`; measured, benchmark 12).
+PLANAR_MIN_N = 128
+#: Row-block height of the planar stage's triangular products: real products of half the
+#: work of complex ones stay efficient at smaller blocks (8 blocks from n = 512, benchmark 12).
+_PLANAR_BLOCK = 64
 
 
 class DenseSmall(NamedTuple):
@@ -74,13 +81,16 @@ class DenseSmall(NamedTuple):
 
 class DenseBlas(NamedTuple):
     """A dense ``n x n`` state, products through BLAS. ``rowoff`` and ``blocks`` describe the
-    packed triangular product of the fused IsoMP stage (:mod:`.dense_tiles`)."""
+    packed triangular product of the fused IsoMP stage (:mod:`.dense_tiles`); ``planar``: a
+    complex state from :data:`PLANAR_MIN_N` on, whose IsoMP runs in real planes
+    (:mod:`.dense_planar`)."""
 
     n: int
     s: float
     traceless: bool
     rowoff: NDArray[np.int64]
     blocks: NDArray[np.int64]
+    planar: bool
 
 
 def sigma_sign(alg: Any) -> float | None:
@@ -104,13 +114,13 @@ def lower_blocks(n: int, block: int = _BLOCK) -> list[tuple[int, int]]:
     return [(r0, min(n, r0 + size)) for r0 in range(0, n, size)]
 
 
-def packed_row_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(blocks, rowoff)``: the blocks as an ``(nb, 2)`` array and, for each row ``i`` of
-    block ``(r0, r1)``, the offset of its ``r1`` entries in the packed ``T``.
+def packed_row_offsets(n: int, block: int = _BLOCK) -> tuple[np.ndarray, np.ndarray]:
+    """``(blocks, rowoff)``: the blocks (:func:`lower_blocks`) as an ``(nb, 2)`` array and, for
+    each row ``i`` of block ``(r0, r1)``, the offset of its ``r1`` entries in the packed ``T``.
 
     The packed size ``sum (r1 - r0) r1`` never exceeds ``n^2``.
     """
-    blocks = lower_blocks(n)
+    blocks = lower_blocks(n, block)
     rowoff = np.empty(n, dtype=np.int64)
     off = 0
     for r0, r1 in blocks:
@@ -326,8 +336,9 @@ def record(alg: Any) -> DenseSmall | DenseBlas:
     if n <= SMALL_N:
         return DenseSmall(n, s, traceless)
     _load_scipy_blas()
-    blocks_, rowoff = packed_row_offsets(n)
-    return DenseBlas(n, s, traceless, rowoff, blocks_)
+    planar = bool(alg.is_complex) and n >= PLANAR_MIN_N
+    blocks_, rowoff = packed_row_offsets(n, _PLANAR_BLOCK if planar else _BLOCK)
+    return DenseBlas(n, s, traceless, rowoff, blocks_, planar)
 
 
 def dense_layout(problem: Any, members: int) -> Layout | None:
@@ -342,7 +353,10 @@ def dense_layout(problem: Any, members: int) -> Layout | None:
         return None
     kernel = problem.kernel
     rec = record(alg)
-    kind = "written-out products" if isinstance(rec, DenseSmall) else "BLAS"
+    if isinstance(rec, DenseSmall):
+        kind = "written-out products"
+    else:
+        kind = "BLAS, real planes" if rec.planar else "BLAS"
     name = f"dense {alg.name} ({kind})"
     if isinstance(kernel, ElementwiseLinear) and kernel.frame is not None:
         return _frame_layout(name, rec, alg, kernel)

@@ -28,7 +28,7 @@ from typing import Any
 from ...methods import IsoMP, SphericalMidpoint, Strang
 from ...methods._base import StepDataRequest
 from ...splitting import data_widths
-from .. import dense_tiles, spin_chain
+from .. import dense_planar, dense_tiles, spin_chain
 from ..dense import DenseBlas
 from ..layout import Layout
 from ..spin_chain import SpinChain
@@ -52,15 +52,19 @@ class Specialization:
     ----------
     choose : callable
         ``layout -> (iterate, finish)`` (e.g. the serial or threaded sweeps).
-    nwork : int
-        Scratch rows per unit.
+    nwork : int or callable
+        Scratch rows per unit, or ``layout -> rows`` when they depend on the choice.
     why : str
         The benchmark that justifies it.
     """
 
     choose: Callable[[Layout], tuple[Any, Any]]
-    nwork: int
+    nwork: int | Callable[[Layout], int]
     why: str
+
+    def rows(self, layout: Layout) -> int:
+        """Scratch rows per unit on ``layout``."""
+        return self.nwork(layout) if callable(self.nwork) else self.nwork
 
 
 @dataclass(frozen=True)
@@ -153,7 +157,7 @@ class CompiledStage:
         spec = self.specializations.get(type(layout.record))
         if spec is not None:
             it, fin = spec.choose(layout)
-            return StageOnLayout(self.begin, it, fin, spec.nwork)
+            return StageOnLayout(self.begin, it, fin, spec.rows(layout))
         if not self.needs <= layout.blocks:
             return None
         return StageOnLayout(self.begin, self.iterate, self.finish, self.nwork)
@@ -171,6 +175,18 @@ def register(method: type, stage: CompiledStage) -> None:
 def stage_for(method: Any) -> CompiledStage | None:
     """The compiled stage of ``method`` (an instance), or ``None``."""
     return _STAGES.get(type(method))
+
+
+def _dense_blas_isomp(layout: Layout) -> tuple[Any, Any]:
+    """IsoMP on the BLAS layout: real planes and 3M products for large complex states, else
+    the complex tiles."""
+    if layout.record.planar:
+        return dense_planar.iterate, dense_planar.finish
+    return dense_tiles.iterate, dense_tiles.finish
+
+
+def _dense_blas_rows(layout: Layout) -> int:
+    return dense_planar.NWORK if layout.record.planar else dense_tiles.NWORK
 
 
 def _isomp_offsets(method: IsoMP) -> int:
@@ -193,9 +209,10 @@ register(
         compensated=lambda method: bool(method.compensated),
         specializations={
             DenseBlas: Specialization(
-                lambda layout: (dense_tiles.iterate, dense_tiles.finish),
-                dense_tiles.NWORK,
-                "benchmarks 3, 10, 12: the triangular product and one tile pass",
+                _dense_blas_isomp,
+                _dense_blas_rows,
+                "benchmarks 3, 10, 12: the triangular product and one tile pass; complex "
+                "states from n = PLANAR_MIN_N in real planes with 3M products (benchmark 12)",
             ),
             SpinChain: Specialization(
                 spin_chain.isomp_sweeps,

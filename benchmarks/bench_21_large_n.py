@@ -1,0 +1,154 @@
+"""Benchmark 21: Euler on the sphere at large N (issue 24): time per unit of simulated time
+against an older commit, and the thread scaling of one iteration.
+
+1. The ``euler-sphere`` random vorticity (``seed = 1``), ``h ||B||_2 = 0.3``, IsoMP with its
+   defaults, ``STEPS`` steps at N = 512 and 1024 (quick: 10 steps at N = 256), one BLAS
+   thread: the seconds per unit of simulated time of this checkout against those of the commit
+   ``ISOFLOW_BASELINE_REV`` (default: the commit before issue 24), whose ``src`` is taken
+   with ``git archive`` from the checkout's repository. Each variant runs in a fresh process
+   (imports and numba's cache loads are not timed; one warm-up step is); the two alternate,
+   ``REPEATS`` times, and the best of each is compared (six states saved: the Casimirs of a
+   saved state cost eigenvalues, more than a step). Also recorded: the iterations per
+   step, the largest relative energy error and the Casimir drift of both (target: time at
+   most 0.5 of the old, Casimir drift at rounding, energy error no larger).
+2. One iteration at N = 512 and 1024 (quick: 256) with two BLAS threads against one, both in
+   this process, alternately (target: at least 1.7x faster with two).
+
+Run alone: ``python benchmarks/bench_21_large_n.py``. Without git or the baseline commit,
+part 1 is reported as not measured.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from suite import StepTimer, benchmark, record
+
+#: The commit before issue 24 (the planar 3M stage).
+BASELINE_REV = os.environ.get("ISOFLOW_BASELINE_REV", "59b7df7")
+STEPS = 50
+REPEATS = 2
+
+_PROBE = """
+import json, sys, time
+import numpy as np
+from threadpoolctl import threadpool_limits
+threadpool_limits(1)
+import isoflow as iso
+N, steps = int(sys.argv[1]), int(sys.argv[2])
+prob, W0 = iso.models.euler_sphere(N=N, seed=1)
+h = float(0.3 / np.linalg.norm(prob.B(W0), 2))
+iso.solve(prob, iso.IsoMP(), W0, dt=h, n_steps=1, progress=False)  # compile or load the cache
+t = time.perf_counter()
+sol = iso.solve(prob, iso.IsoMP(), W0, dt=h, n_steps=steps, save_every=max(1, steps // 5),
+                progress=False)  # diagnostics (eigenvalues) of a few states, not of every step
+seconds = time.perf_counter() - t
+H = np.asarray(sol.diagnostics.hamiltonian)
+print(json.dumps({"seconds_per_time": seconds / (steps * h),
+                  "iterations": float(sol.stats.iterations_mean),
+                  "energy_error": float(np.max(np.abs(H - H[0])) / abs(H[0])),
+                  "casimir_drift": float(sol.diagnostics.casimir_drift)}))
+"""
+
+
+def _baseline_src(rev: str) -> Path | None:
+    """``src`` of commit ``rev`` of this checkout's repository, extracted once per machine."""
+    repo = Path(__file__).resolve().parents[1]
+    dest = Path(tempfile.gettempdir()) / f"isoflow-baseline-{rev}"
+    if (dest / "src" / "isoflow").is_dir():
+        return dest / "src"
+    try:
+        dest.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(
+            ["git", "-C", str(repo), "archive", rev, "src"], capture_output=True, check=True
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return dest / "src"
+
+
+def _probe(src: Path | None, N: int, steps: int) -> dict[str, float]:
+    """One run in a fresh process of the package in ``src`` (the baseline), else of this
+    checkout's."""
+    here = Path(__file__).resolve().parents[1] / "src"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(src or here)}
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE, str(N), str(steps)],
+        capture_output=True, text=True, env=env, check=True,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def _against_baseline(N: int, steps: int) -> dict[str, Any]:
+    src = _baseline_src(BASELINE_REV)
+    name = (
+        f"euler_sphere N = {N}, h ||B|| = 0.3, {steps} steps: time per simulated time / "
+        f"{BASELINE_REV}"
+    )
+    if src is None:
+        why = f"the baseline commit {BASELINE_REV} is not available (git archive)"
+        return record(21, name, metric="ratio", value=float("nan"), target="<= 0.5", met=None,
+                      why=why)  # fmt: skip
+    runs: dict[str, list[dict[str, float]]] = {"new": [], "old": []}
+    for _ in range(REPEATS):
+        runs["new"].append(_probe(None, N, steps))
+        runs["old"].append(_probe(src, N, steps))
+    best = {k: min(v, key=lambda r: r["seconds_per_time"]) for k, v in runs.items()}
+    ratio = best["new"]["seconds_per_time"] / best["old"]["seconds_per_time"]
+    ok = (
+        ratio <= 0.5
+        and best["new"]["casimir_drift"] < 1e-12
+        and best["new"]["energy_error"] <= 1.01 * best["old"]["energy_error"]
+    )
+    return record(21, name, metric="ratio", value=ratio, target="<= 0.5", met=ok,
+                  new=best["new"], old=best["old"])  # fmt: skip
+
+
+def _thread_scaling(N: int) -> dict[str, Any]:
+    import isoflow as iso
+    from isoflow.threads import available_cores, thread_limits
+
+    prob, W0 = iso.models.euler_sphere(N=N, seed=1)
+    h = float(0.3 / np.linalg.norm(prob.B(W0), 2))
+    name = f"euler_sphere N = {N}: one iteration, 2 BLAS threads against 1"
+    if available_cores() < 2:
+        return record(21, name, metric="speed-up", value=float("nan"), target=">= 1.7",
+                      met=None, why="one core")  # fmt: skip
+    timers = {b: StepTimer(prob, iso.IsoMP(), W0, h) for b in (1, 2)}
+    best = {1: np.inf, 2: np.inf}
+    for rep in range(4):
+        for b, timer in timers.items():
+            with thread_limits(blas=b, numba=1):
+                t = time.perf_counter()
+                its = timer.advance(1)
+                if rep:  # the first round is the warm-up
+                    best[b] = min(best[b], (time.perf_counter() - t) / its)
+    speedup = best[1] / best[2]
+    ms = {"1": best[1] * 1e3, "2": best[2] * 1e3}
+    return record(21, name, metric="speed-up", value=speedup, target=">= 1.7",
+                  met=speedup >= 1.7, ms_per_iteration=ms)  # fmt: skip
+
+
+@benchmark(21, "Euler on the sphere, N = 512, 1024: time per simulated time against the commit "
+               "before issue 24, and two BLAS threads against one")  # fmt: skip
+def run(quick: bool) -> list[dict[str, Any]]:
+    sizes = (256,) if quick else (512, 1024)
+    steps = 10 if quick else STEPS
+    out = [_against_baseline(N, steps) for N in sizes]
+    out += [_thread_scaling(N) for N in sizes]
+    return out
+
+
+if __name__ == "__main__":
+    for row in run("--quick" in sys.argv):
+        print(json.dumps(row, default=float))
