@@ -10,7 +10,9 @@ entries: in flops a small fraction of the two complex ``N x N`` products of each
 iterations. The iterations per step are reported too; the ratio per iteration is the cost of
 the split itself.
 
-Measured (N = 128, 256, machine shared): 1.28, 1.20, not met. The cost is memory traffic,
+Measured (N = 128, 256, machine shared): 1.13, 1.22, not met (1.27, 1.29 before the split
+step took IsoMP's real-plane specialization for large complex states, as the ideal step does).
+The rest is memory traffic,
 not arithmetic: a half step reads the folded per-diagonal matrices once, about ``N^3 / 12``
 doubles (11 MB at N = 256, 90 MB at 512, 0.7 GB at 1024), so one half step takes about as
 long as one complex product (4.0 ms against 3.1 ms at N = 256, 22 ms against 25 ms at 512),

@@ -242,6 +242,13 @@ register(
 )
 
 
+def _dense_blas_split(layout: Layout) -> tuple[Any, Any]:
+    """The split step on the BLAS layout: IsoMP's specialization with the half step after it."""
+    if layout.record.planar:
+        return dense_planar.iterate, split.finish_planar
+    return dense_tiles.iterate, split.finish_tiles
+
+
 def _split_applies(method: Strang, problem: Any, composed: bool) -> bool:
     """``Strang(IsoMP())``; composed only when its step data are empty (steady forcing)."""
     if type(method.base) is not IsoMP:
@@ -266,8 +273,8 @@ register(
         accepts=lambda layout: layout.lanes == 1 and layout.identity,
         specializations={
             DenseBlas: Specialization(
-                lambda layout: (dense_tiles.iterate, split.finish_tiles),
-                dense_tiles.NWORK,
+                _dense_blas_split,
+                _dense_blas_rows,
                 "IsoMP's (benchmarks 3, 10, 12); the split step's cost: benchmark 15",
             ),
         },

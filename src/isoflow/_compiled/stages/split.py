@@ -3,8 +3,9 @@ the forcing (:class:`isoflow.Strang`, :mod:`isoflow.splitting`).
 
 ``begin`` applies the first half step :math:`S_{h/2}` to the state before the solve, ``finish``
 IsoMP's finish and then the second half step to the new state; the iteration is IsoMP's (on the
-BLAS layout its fused specialization, :mod:`isoflow._compiled.dense_tiles`, with
-:func:`finish_tiles`). A half step is
+BLAS layout its specializations: :mod:`isoflow._compiled.dense_tiles` with
+:func:`finish_tiles`, and for large complex states :mod:`isoflow._compiled.dense_planar` with
+:func:`finish_planar`). A half step is
 
 * the exact flow of the linear part, :func:`apply_flow`, dispatched on the class of its record:
   :class:`ModalFlow` (a basis you give, any layout whose unit is one member) here, the
@@ -30,7 +31,7 @@ from numba.core import errors as numba_errors
 from numba.extending import overload
 from numpy.typing import NDArray
 
-from .. import blocks, dense_tiles
+from .. import blocks, dense_planar, dense_tiles
 
 __all__ = [
     "ModalFlow",
@@ -39,6 +40,7 @@ __all__ = [
     "apply_flow",
     "begin",
     "finish",
+    "finish_planar",
     "finish_tiles",
     "params",
     "provide_flow",
@@ -172,6 +174,14 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: igno
 def finish_tiles(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: ignore[no-untyped-def]
     """:func:`finish` after IsoMP's fused BLAS finish (:mod:`isoflow._compiled.dense_tiles`)."""
     dense_tiles.finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)
+    _half_step(mp, sd, Wn, h, 1)
+
+
+@numba.njit(cache=True)
+def finish_planar(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """:func:`finish` after IsoMP's finish in real planes (:mod:`isoflow._compiled.dense_planar`,
+    large complex states)."""
+    dense_planar.finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)
     _half_step(mp, sd, Wn, h, 1)
 
 
