@@ -162,3 +162,17 @@ def test_qg_drag_relaxes_to_rest_not_to_zero_potential_vorticity() -> None:
     rel0 = float(np.linalg.norm(Q0 - Fo))
     rel = float(np.linalg.norm(sol.ys[-1] - Fo))
     assert rel == pytest.approx(rel0 * np.exp(-0.5 * 10.0), rel=1e-6)
+
+
+def test_qg_band_forcing_injects_the_requested_rate_of_qg_energy() -> None:
+    """``energy_rate`` is the mean injection of the model's own energy: the QG energy of a
+    unit harmonic is :math:`-\\langle e, A^{-1}e\\rangle < 1/\\lambda_l` (the stretching term),
+    so the QG model's band amplitude is larger than Euler's for the same rate."""
+    kw = {"N": 8, "omega": 1.0, "drag": 0.1, "forcing_band": (3, 1), "energy_rate": 0.1}
+    pq, Qq = iso.models.qg_sphere(lamb=50.0, **kw)
+    pe, We = iso.models.euler_sphere(**kw)
+    assert float(pq.invariants["energy_injection"](Qq)) == pytest.approx(0.1, rel=1e-12)
+    assert float(pe.invariants["energy_injection"](We)) == pytest.approx(0.1, rel=1e-12)
+    sigma_q = pq.parameters["forcing"][0]["sigma_rms"]
+    sigma_e = pe.parameters["forcing"][0]["sigma_rms"]
+    assert sigma_q > 1.3 * sigma_e

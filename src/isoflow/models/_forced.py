@@ -107,8 +107,13 @@ def sphere_split(
     forcing_band: tuple[int, int] | None = None,
     energy_rate: float | None = None,
     forcing_seed: int | None = None,
+    energy_weight: Callable[[Array], Array] | None = None,
 ) -> SplitSpec:
-    """The linear part and forcing terms of a sphere model (none when all are off).
+    r"""The linear part and forcing terms of a sphere model (none when all are off).
+
+    ``energy_weight(E)``, for unit harmonics ``E`` (``(r, N, N)``), is the model's energy of
+    each (:math:`1/\lambda_l` for Euler, the default): the band forcing's amplitude is chosen
+    so that its mean injection of *this* energy is ``energy_rate``.
 
     Raises
     ------
@@ -134,6 +139,8 @@ def sphere_split(
     if not dissipative and not user:
         return SplitSpec(None, (), (), {})
     lin = SphereDissipation(N, c)
+    if forcing_band is not None and energy_weight is not None:
+        user = (*user[:-1], _rescaled(user[-1], lin, energy_weight, rate))
     terms: list[Forcing | StochasticForcing] = list(user)
     if dissipative and np.any(planetary != 0):  # relax to the planetary vorticity, not to 0
         terms.append(Forcing(c[1] * planetary))
@@ -146,6 +153,22 @@ def sphere_split(
         params.update(forcing_band=[int(v) for v in forcing_band], energy_rate=float(rate))
         params["forcing_seed"] = int(seed)
     return SplitSpec(lin, tuple(terms), user, params)
+
+
+def _rescaled(
+    band: Forcing | StochasticForcing,
+    lin: SphereDissipation,
+    energy_weight: Callable[[Array], Array],
+    rate: float,
+) -> StochasticForcing:
+    r"""``band`` with the one amplitude whose mean injection of the model's energy is ``rate``:
+    :math:`\frac12\sigma^2\sum_j w_j = \varepsilon` with :math:`w_j` the energy of mode
+    ``j`` (Itô)."""
+    assert isinstance(band, StochasticForcing)
+    modes, _ = noise_modes(band)
+    weights = np.asarray(energy_weight(lin.modes(modes)), dtype=float)
+    sigma = np.sqrt(2.0 * float(rate) / float(np.sum(weights)))
+    return StochasticForcing(modes, sigma, band.seed)
 
 
 class _Coefficients:

@@ -56,7 +56,6 @@ from ..problems import IsospectralProblem
 from ..sphere import (
     basis_matrix,
     enstrophy,
-    from_coefficients,
     hbar,
     laplacian_coefficients,
     to_coefficients,
@@ -272,10 +271,16 @@ def qg_sphere(
     from ..sphere.compiled import qg_field
 
     kernel = CompiledB(qg_field, (op.inv_piv, op.mult, 1.0 / h, planetary), name="qg_field")
+
+    def energy_weight(E: Array) -> Array:
+        r"""The QG energy of each unit harmonic ``E``: :math:`-\frac{4\pi}{N}\operatorname{Re}
+        \langle E, A^{-1}E\rangle` (:math:`1/\lambda_l` as ``F, kappa -> 0``)."""
+        return -(4.0 * np.pi / N) * np.einsum("kab,kab->k", np.conj(E), op.solve(E)).real
+
     split = sphere_split(
         N, viscosity=viscosity, hyperviscosity=hyperviscosity, drag=drag, forcing=forcing,
         planetary=F, model="qg_sphere", forcing_band=forcing_band, energy_rate=energy_rate,
-        forcing_seed=forcing_seed,
+        forcing_seed=forcing_seed, energy_weight=energy_weight,
     )  # fmt: skip
 
     def relative(Q: Array) -> Array:
@@ -295,8 +300,8 @@ def qg_sphere(
         return B @ Qa - Qa @ B
 
     def noise_weight(modes: Array) -> Array:
-        E = from_coefficients(np.eye(N * N - 1)[modes], N)
-        return -(4.0 * np.pi / N) * np.einsum("kab,kab->k", np.conj(E), op.solve(E)).real
+        assert split.linear_part is not None  # a noise acts on modes of the linear part
+        return energy_weight(split.linear_part.modes(modes))
 
     theta = np.linspace(0.0, np.pi, ZONAL_LATITUDES)
     invariants: dict[str, Callable[[Array], Array]] = {
