@@ -54,6 +54,7 @@ from .methods import IsoSyRK as IsoSyRK
 from .methods import Method as Method
 from .methods import SphericalMidpoint as SphericalMidpoint
 from .methods import StepResult as StepResult
+from .methods import StochasticIsoMP as StochasticIsoMP
 from .nonlinear import FixedPoint as FixedPoint
 from .nonlinear import Newton as Newton
 from .problems import IsospectralProblem as IsospectralProblem
@@ -62,6 +63,7 @@ if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
     from . import experiments as experiments
     from . import io as io
     from . import models as models
+    from . import noise as noise
     from . import plotting as plotting
     from . import registry as registry
     from . import sphere as sphere
@@ -72,7 +74,7 @@ if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
 
 #: Submodules loaded on first attribute access.
 _LAZY_MODULES = frozenset(
-    {"experiments", "io", "models", "plotting", "registry", "sphere", "sweep", "threads"}
+    {"experiments", "io", "models", "noise", "plotting", "registry", "sphere", "sweep", "threads"}
 )
 #: Attributes loaded on first access: name -> (module, attribute).
 _LAZY_ATTRIBUTES = {
@@ -129,6 +131,7 @@ __all__ = [
     "SpinNeighbourSum",
     "StepResult",
     "StepSizeError",
+    "StochasticIsoMP",
     "TimeSpanError",
     "UnsupportedAlgebraError",
     "__version__",
@@ -136,6 +139,7 @@ __all__ = [
     "experiments",
     "io",
     "models",
+    "noise",
     "plotting",
     "reference_solution",
     "registry",

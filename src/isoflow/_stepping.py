@@ -29,6 +29,7 @@ from ._errors import NotInSpaceError
 from ._failures import B_RAISED, LEFT_SPACE, MemberFailures
 from ._save_grid import SaveGrid
 from .methods import Method
+from .methods._base import StepDataRequest
 from .nonlinear import STATUS_CONVERGED, STATUS_NON_FINITE
 from .problems import IsospectralProblem
 
@@ -222,9 +223,21 @@ class PythonRunner(Runner):
         self.failures.record(m, step, status, 0, float("nan"))
         self.failures.messages[m] = message
 
-    def _step_all(self, y: Array, st: Any) -> tuple[Any, BaseException | None]:
+    def _data(self, k: int, members: NDArray[np.intp]) -> dict[str, Array]:
+        """``{"data": rows}``: the step data of step ``k + 1`` (from ``t0 + k h``) of the
+        ``members`` for a method that reads some (:attr:`Method.reads_step_data`), else ``{}``."""
+        if not self.method.reads_step_data:
+            return {}
+        request = StepDataRequest(int(k), 1, np.asarray(members, dtype=np.int64), self.h)
+        rows = np.asarray(self.method.step_data(self.uncounted, request))[0]
+        return {"data": rows[0] if self.single else rows}
+
+    def _step_all(
+        self, y: Array, st: Any, k: int, members: NDArray[np.intp]
+    ) -> tuple[Any, BaseException | None]:
         try:
-            return self.method.step(self.problem, y, self.h, st), None
+            data = self._data(k, members)
+            return self.method.step(self.problem, y, self.h, st, **data), None
         except Exception as exc:  # B (or the user's code under it) raised
             return None, exc
 
@@ -254,7 +267,7 @@ class PythonRunner(Runner):
         for _ in range(nsteps):
             k = self.k
             try:
-                res = method.step(problem, y, h, st)
+                res = method.step(problem, y, h, st, **self._data(k, np.zeros(1, np.intp)))
             except Exception as exc:  # B (or the user's code under it) raised
                 self.failures.record(0, k, B_RAISED, 0, float("nan"))
                 self.failures.messages[0] = f"{type(exc).__name__}: {exc}"
@@ -289,7 +302,7 @@ class PythonRunner(Runner):
         if alive.size > 1:
             for m in alive:
                 one = np.array([m])
-                _, e = self._step_all(self.Y[one], take_members(self.mstate, one, self.M))
+                _, e = self._step_all(self.Y[one], take_members(self.mstate, one, self.M), k, one)
                 if e is not None:
                     raised[int(m)] = e
         if not raised:
@@ -310,7 +323,7 @@ class PythonRunner(Runner):
             y, st = self.Y, self.mstate
         else:
             y, st = self.Y[alive], take_members(self.mstate, alive, self.M)
-        res, exc = self._step_all(y, st)
+        res, exc = self._step_all(y, st, k, alive)
         if exc is not None:
             self._isolate(k, alive, exc)
             return

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from ._errors import InvalidBError
 from .algebras import Algebra
 from .kernels import Kernel
+from .noise import TransportNoise
 
 __all__ = ["IsospectralProblem"]
 
@@ -61,6 +62,11 @@ class IsospectralProblem:
         compiled code wherever the method and solver have a compiled path (same answer and
         iteration counts as the NumPy path to rounding). When both ``B`` and ``kernel`` are
         given they must agree (checked at the initial state when a run starts).
+    noise : TransportNoise or None
+        Stratonovich transport noise :math:`\sum_i [B_i(W), W] \circ d\beta_i`
+        (:class:`isoflow.noise.TransportNoise`): the problem is then the stochastic
+        Lie–Poisson system :math:`dW = [B(W), W]\,dt + \sum_i [B_i(W), W] \circ d\beta_i`,
+        integrated by :class:`~isoflow.StochasticIsoMP` (the deterministic methods refuse it).
     """
 
     B: Callable[[Array], Array] = None  # type: ignore[assignment]
@@ -73,6 +79,7 @@ class IsospectralProblem:
     name: str = "isospectral problem"
     parameters: Mapping[str, Any] = field(default_factory=dict)
     kernel: Kernel | None = None
+    noise: TransportNoise | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.algebra, Algebra):
@@ -87,6 +94,12 @@ class IsospectralProblem:
                     f"SpinNeighbourSum, PairwiseVortex) or None, got {self.kernel!r}"
                 )
             self.kernel.check(self.algebra)
+        if self.noise is not None:
+            if not isinstance(self.noise, TransportNoise):
+                raise TypeError(
+                    f"noise must be an iso.noise.TransportNoise or None, got {self.noise!r}"
+                )
+            self.noise.check(self.algebra)
         if self.B is None:
             if self.kernel is None:
                 raise TypeError("give B, or a kernel (e.g. iso.CompiledB(f)) to derive it from")

@@ -90,6 +90,8 @@ def compiled_runner(
     stage = stage_for(base)
     if stage is None or type(getattr(base, "solver", None)) is not FixedPoint:
         return None
+    if not stage.takes(problem):
+        return None
     alg = problem.algebra
     y = np.asarray(y)
     if y.dtype != alg.dtype:
@@ -139,7 +141,7 @@ class CompiledRunner(Runner):
         field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
-        self.mp = stage.params(method, problem)
+        self.mp = stage.params(method, problem, layout)
         self.stage = stage
         self.method = method
         self.problem = problem

@@ -13,7 +13,7 @@ from .._failures import NAMES
 from ..nonlinear import STATUS_CONVERGED, NonlinearResult, NonlinearSolver
 from ..problems import IsospectralProblem
 
-__all__ = ["Method", "StepResult", "check_implicit_options"]
+__all__ = ["Method", "StepDataRequest", "StepResult", "check_implicit_options"]
 
 Array = NDArray[Any]
 
@@ -67,6 +67,18 @@ class StepResult:
         return NAMES.get(code, str(code))
 
 
+@dataclass(frozen=True)
+class StepDataRequest:
+    """What a method's step data is for: the steps ``k0 + 1 .. k0 + nsteps`` of the members
+    ``members`` (their indices in the run, flattened; ``-1`` for the padding lanes of a compiled
+    unit), with step ``h``. Step ``k`` goes from ``t0 + (k - 1) h`` to ``t0 + k h``."""
+
+    k0: int
+    nsteps: int
+    members: Any
+    h: float
+
+
 class Method:
     r"""Base of the integrators: a small frozen dataclass with ``init`` and ``step``.
 
@@ -95,6 +107,9 @@ class Method:
 
     Notes
     -----
+    A method that reads step data (:attr:`reads_step_data`) takes it as the keyword ``data``
+    of :meth:`step`: the rows ``(*batch, D)`` of the step's members.
+
     Every array in ``state`` that belongs to ensemble members has the batch axes leading,
     shape ``(*batch, ...)``, so that members can be selected by indexing those axes.
     """
@@ -103,6 +118,14 @@ class Method:
     implicit: ClassVar[bool]
     symmetric: ClassVar[bool] = False
     name: ClassVar[str]
+    #: Whether the steps read *step data* (e.g. noise increments): a function of the method,
+    #: the problem, the step and the member alone (:meth:`step_data`), handed to
+    #: :meth:`step` as ``data`` by the time loop, so that a resumed or split run reads the same.
+    reads_step_data: ClassVar[bool] = False
+
+    def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
+        """The step data ``(nsteps, members, D)`` of ``request`` (methods that read some)."""
+        raise NotImplementedError  # pragma: no cover
 
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
         """Initial method state (default: none)."""

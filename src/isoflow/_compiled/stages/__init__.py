@@ -24,12 +24,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ...methods import IsoMP, SphericalMidpoint
+from ...methods import IsoMP, SphericalMidpoint, StochasticIsoMP
+from ...methods._base import StepDataRequest
 from .. import dense_tiles, spin_chain
 from ..dense import DenseBlas
 from ..layout import Layout
 from ..spin_chain import SpinChain
-from . import isomp, spherical_midpoint
+from . import isomp, spherical_midpoint, stochastic_isomp
 
 __all__ = [
     "CompiledStage",
@@ -74,20 +75,18 @@ def _no_offsets(method: Any) -> int:
     return 0
 
 
-def _no_params(method: Any, problem: Any) -> tuple[Any, ...]:
+def _no_params(method: Any, problem: Any, layout: Layout) -> tuple[Any, ...]:
     return ()
 
 
-@dataclass(frozen=True)
-class StepDataRequest:
-    """What a stage's step data is for: the steps ``k0 + 1 .. k0 + nsteps`` of the members
-    ``members`` (their indices in the run, flattened; ``-1`` for the padding lanes of the last
-    unit), with step ``h``."""
+def _takes_all(problem: Any) -> bool:
+    return True
 
-    k0: int
-    nsteps: int
-    members: Any
-    h: float
+
+def _method_step_data(method: Any, problem: Any, request: StepDataRequest) -> Any:
+    """The step data of a method that reads some (:meth:`isoflow.Method.step_data`): the
+    compiled and the NumPy paths read the same."""
+    return method.step_data(problem, request)
 
 
 @dataclass(frozen=True)
@@ -108,7 +107,10 @@ class CompiledStage:
         solve starts from the state). The method state is then ``(h, D_1, D_2, ...)``, newest
         first, as :class:`isoflow.IsoMP` keeps it.
     params : callable
-        ``(method, problem) -> tuple``: the method's parameters as the stage reads them.
+        ``(method, problem, layout) -> tuple``: the method's parameters as the stage reads them
+        (arrays in the layout's units).
+    takes : callable
+        ``problem -> bool``: whether the stage runs the problem compiled (else the NumPy path).
     begin : numba dispatcher or None
         An explicit part before each solve (a split step), or none.
     step_data : callable or None
@@ -128,7 +130,8 @@ class CompiledStage:
     needs: frozenset[str]
     nwork: int
     offsets: Callable[[Any], int] = _no_offsets
-    params: Callable[[Any, Any], tuple[Any, ...]] = _no_params
+    params: Callable[[Any, Any, Layout], tuple[Any, ...]] = _no_params
+    takes: Callable[[Any], bool] = _takes_all
     begin: Any = None
     step_data: Callable[[Any, Any, StepDataRequest], Any] | None = None
     specializations: dict[type, Specialization] = field(default_factory=dict)
@@ -205,5 +208,18 @@ register(
                 "benchmark 5: fused memory sweeps",
             ),
         },
+    ),
+)
+register(
+    StochasticIsoMP,
+    CompiledStage(
+        "stochastic IsoMP",
+        stochastic_isomp.iterate,
+        isomp.finish,
+        frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
+        stochastic_isomp.NWORK,
+        params=stochastic_isomp.noise_params,
+        takes=stochastic_isomp.compiled_noise,
+        step_data=_method_step_data,
     ),
 )

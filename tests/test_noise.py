@@ -1,0 +1,187 @@
+"""Reproducible increments and the stochastic isospectral midpoint (issue 22).
+
+Statistical checks state their seeds and bounds: a bound of ``z`` standard errors fails a
+correct implementation with probability below ``2 Phi(-z)`` (for ``z = 5``: 6e-7); the seeds are
+fixed, so each check is deterministic.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numba
+import numpy as np
+import pytest
+from scipy.special import ndtri
+
+import isoflow as iso
+from isoflow import noise
+from isoflow._errors import InvalidBError, ParameterError, ShapeError
+from isoflow._noise_kernels import normal_quantile, philox_block
+from isoflow.noise import TransportNoise
+
+
+@numba.njit(cache=True)
+def _blocks(n, c1, c2, k0, k1):  # type: ignore[no-untyped-def]
+    out = np.empty(4 * n, dtype=np.uint64)
+    for b in range(n):
+        w = philox_block(
+            np.uint64(b + 1), np.uint64(c1), np.uint64(c2), np.uint64(0), np.uint64(k0),
+            np.uint64(k1),
+        )  # fmt: skip
+        out[4 * b : 4 * b + 4] = w
+    return out
+
+
+@numba.njit(cache=True)
+def _quantiles(p):  # type: ignore[no-untyped-def]
+    out = np.empty_like(p)
+    for i in range(p.shape[0]):
+        out[i] = normal_quantile(p[i])
+    return out
+
+
+# ---- the generator ------------------------------------------------------------------------------
+
+
+def test_philox_blocks_are_numpys_philox_bit_for_bit() -> None:
+    key = np.array([2**63 + 12345, 7], dtype=np.uint64)  # a list would go through float
+    ref = np.random.Philox(key=key, counter=[0, 5, 3, 0]).random_raw(64)
+    assert _blocks(16, 5, 3, key[0], key[1]).tobytes() == ref.tobytes()
+
+
+def test_normal_quantile_matches_scipy_to_rounding() -> None:
+    p = np.concatenate([np.linspace(0, 1, 20001)[1:-1], np.logspace(-300, -1, 300)])
+    p = np.concatenate([p, 1 - p[p > 1e-15]])
+    ref = ndtri(p)
+    err = np.abs(_quantiles(p) - ref) / np.maximum(1.0, np.abs(ref))
+    assert float(err.max()) < 4e-15
+
+
+def test_a_steps_normals_do_not_depend_on_the_chunks_or_the_other_members() -> None:
+    whole = noise.standard_normals(11, [0, 1, 2, 3], 0, 12, 5)
+    pieces = np.concatenate(
+        [noise.standard_normals(11, [3, 1], k0, n, 5) for k0, n in ((0, 3), (3, 1), (4, 8))]
+    )
+    assert pieces[:, 0].tobytes() == whole[:, 3].tobytes()
+    assert pieces[:, 1].tobytes() == whole[:, 1].tobytes()
+    padded = noise.standard_normals(11, [2, -1], 0, 12, 5)
+    assert padded[:, 0].tobytes() == whole[:, 2].tobytes() and not padded[:, 1].any()
+
+
+def test_streams_seeds_and_members_draw_independent_normals() -> None:
+    a = noise.standard_normals(1, [0], 0, 4, 4)
+    assert not np.array_equal(a, noise.standard_normals(2, [0], 0, 4, 4))
+    assert not np.array_equal(a, noise.standard_normals(1, [1], 0, 4, 4))
+    assert not np.array_equal(a, noise.standard_normals(1, [0], 0, 4, 4, stream=1))
+
+
+def test_normals_have_mean_zero_variance_one_and_no_step_correlation() -> None:
+    # seed 2024, 200 000 normals: mean and variance within 5 standard errors
+    z = noise.standard_normals(2024, np.arange(1000), 0, 40, 5)
+    n = z.size
+    assert abs(z.mean()) < 5 / math.sqrt(n)
+    assert abs(z.var() - 1) < 5 * math.sqrt(2 / n)
+    lag = float(np.mean(z[1:] * z[:-1]))  # consecutive steps of one member
+    assert abs(lag) < 5 / math.sqrt(z[1:].size)
+
+
+def test_truncated_increments_stay_within_the_level() -> None:
+    h = 0.01
+    A = noise.truncation_level(h)
+    assert A == pytest.approx(math.sqrt(4 * math.log(100)))
+    dW = noise.brownian_increments(5, np.arange(2000), 0, 50, 2, h)
+    assert float(np.abs(dW).max()) <= A * math.sqrt(h) * (1 + 1e-15)
+    free = noise.brownian_increments(5, np.arange(2000), 0, 50, 2, h, truncation=None)
+    assert float(np.abs(free).max()) > A * math.sqrt(h)  # 200 000 draws reach beyond 4.3
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: noise.standard_normals(None, [0], 0, 1, 1), "seed is required"),
+        (lambda: noise.standard_normals(-1, [0], 0, 1, 1), "seed must be in"),
+        (lambda: noise.standard_normals(1.5, [0], 0, 1, 1), "seed must be an integer"),
+        (lambda: noise.brownian_increments(1, [0], 0, 1, 1, 0.0), "step h must be positive"),
+        (lambda: noise.brownian_increments(1, [0], 0, 1, 1, 0.1, truncation=0.5), "truncation"),
+    ],
+)
+def test_bad_noise_arguments_are_one_line_parameter_errors(call, message) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(ParameterError, match=message) as info:
+        call()
+    assert "\n" not in str(info.value)
+
+
+# ---- transport noise on a problem ---------------------------------------------------------------
+
+
+def _rigid(n: int = 4, sigma: float = 0.3, seed: int = 3):  # type: ignore[no-untyped-def]
+    prob, W0 = iso.models.rigid_body(n)
+    F = sigma * np.stack([prob.algebra.random(i) for i in range(3)])
+    return dataclasses.replace(prob, noise=TransportNoise(F, seed=seed)), W0
+
+
+def test_bad_noise_on_a_problem_is_a_typed_one_line_error() -> None:
+    prob, W0 = iso.models.rigid_body(4)
+    with pytest.raises(ShapeError, match=r"fields must have shape \(m, 4, 4\)"):
+        dataclasses.replace(prob, noise=TransportNoise(np.zeros((2, 3, 3)), seed=1))
+    with pytest.raises(InvalidBError, match="not in the normalizer so"):
+        dataclasses.replace(prob, noise=TransportNoise(np.ones((1, 4, 4)), seed=1))
+    with pytest.raises(InvalidBError, match=r"site noise acts on \(R\^3, x\)\^N"):
+        dataclasses.replace(prob, noise=TransportNoise(site=0.1, seed=1))
+    with pytest.raises(ParameterError, match="seed is required"):
+        TransportNoise(np.zeros((1, 4, 4)))
+    with pytest.raises(ParameterError, match="rigid_body: seed is required"):
+        iso.models.rigid_body(3, noise=0.1)
+    with pytest.raises(ParameterError, match="rigid_body: noise must be a finite number >= 0"):
+        iso.models.rigid_body(3, noise=-0.1, seed=1)
+    noisy, _ = _rigid()
+    with pytest.raises(ParameterError, match="IsoMP would ignore"):
+        iso.solve(noisy, iso.IsoMP(), W0, dt=0.1, n_steps=1)
+    with pytest.raises(ParameterError, match="symmetric"):
+        iso.Composition(iso.StochasticIsoMP(), "suzuki-4")
+    ids = dataclasses.replace(noisy, noise=noisy.noise.with_members([4, 5]))
+    with pytest.raises(ShapeError, match="2 member ids for a run of 3 members"):
+        iso.solve(ids, iso.StochasticIsoMP(), np.stack([W0] * 3), dt=0.1, n_steps=1)
+
+
+def test_zero_noise_is_isomp_from_the_state_bit_for_bit() -> None:
+    noisy, W0 = _rigid(sigma=0.0)
+    prob = dataclasses.replace(noisy, noise=None)
+    Y0 = np.stack([W0] * 3)
+    kw = {"dt": 0.05, "n_steps": 40, "progress": False}
+    a = iso.solve(noisy, iso.StochasticIsoMP(), Y0, **kw)
+    b = iso.solve(prob, iso.IsoMP(initial_guess="state"), Y0, **kw)
+    c = iso.solve(prob, iso.StochasticIsoMP(), Y0, **kw)
+    assert "compiled" in a.stats.runner
+    assert a.ys.tobytes() == b.ys.tobytes() == c.ys.tobytes()
+
+
+def test_compiled_and_numpy_paths_take_the_same_noisy_steps_and_keep_the_casimirs() -> None:
+    noisy, W0 = _rigid()
+    Y0 = np.stack([W0 + 0.01 * k * noisy.algebra.random(k) for k in range(20)])  # lanes
+    kw = {"dt": 0.01, "n_steps": 100, "progress": False}
+    c = iso.solve(noisy, iso.StochasticIsoMP(), Y0, **kw)
+    p = iso.solve(dataclasses.replace(noisy, kernel=None), iso.StochasticIsoMP(), Y0, **kw)
+    assert "lanes" in c.stats.runner and p.stats.runner == "NumPy"
+    assert float(np.abs(c.ys - p.ys).max()) < 1e-12
+    assert float(np.abs(c.ys[-1] - Y0).max()) > 0.05  # the noise moved them
+    assert float(np.max(c.diagnostics.casimir_drift)) < 1e-14
+    single = iso.solve(noisy, iso.StochasticIsoMP(), Y0[0], **kw)  # member 0 alone, dense layout
+    assert "lanes" not in single.stats.runner
+    assert float(np.abs(single.ys - c.ys[:, 0]).max()) < 1e-13
+
+
+def test_member_ids_key_the_paths_whatever_the_ensemble_and_the_threads() -> None:
+    noisy, W0 = _rigid(n=3)
+    Y0 = np.stack([W0 * (1 + 0.1 * k) for k in range(4)])
+    kw = {"dt": 0.02, "n_steps": 30, "progress": False}
+    whole = iso.solve(noisy, iso.StochasticIsoMP(), Y0, threads={"numba": 2}, **kw)
+    part = dataclasses.replace(noisy, noise=noisy.noise.with_members([2, 3]))
+    tail = iso.solve(part, iso.StochasticIsoMP(), Y0[2:], threads={"numba": 1}, **kw)
+    assert tail.ys.tobytes() == whole.ys[:, 2:].tobytes()
+    again = iso.solve(noisy, iso.StochasticIsoMP(), Y0, threads={"numba": 1}, **kw)
+    assert again.ys.tobytes() == whole.ys.tobytes()
+    other = dataclasses.replace(noisy, noise=TransportNoise(noisy.noise.fields, seed=4))
+    assert not np.array_equal(iso.solve(other, iso.StochasticIsoMP(), Y0, **kw).ys, whole.ys)
