@@ -132,10 +132,10 @@ def test_bad_noise_on_a_problem_is_a_typed_one_line_error() -> None:
         dataclasses.replace(prob, noise=TransportNoise(site=0.1, seed=1))
     with pytest.raises(ParameterError, match="seed is required"):
         TransportNoise(np.zeros((1, 4, 4)))
-    with pytest.raises(ParameterError, match="rigid_body: seed is required"):
+    with pytest.raises(ParameterError, match="rigid_body: noise_seed is required"):
         iso.models.rigid_body(3, noise=0.1)
     with pytest.raises(ParameterError, match="rigid_body: noise must be a finite number >= 0"):
-        iso.models.rigid_body(3, noise=-0.1, seed=1)
+        iso.models.rigid_body(3, noise=-0.1, noise_seed=1)
     noisy, _ = _rigid()
     with pytest.raises(ParameterError, match="IsoMP would ignore"):
         iso.solve(noisy, iso.IsoMP(), W0, dt=0.1, n_steps=1)

@@ -75,7 +75,7 @@ class StochasticIsoMP(Method):
     Examples
     --------
     >>> import isoflow as iso
-    >>> prob, W0 = iso.models.rigid_body(3, noise=0.2, seed=1)
+    >>> prob, W0 = iso.models.rigid_body(3, noise=0.2, noise_seed=1)
     >>> sol = iso.solve(prob, iso.StochasticIsoMP(), W0, dt=0.01, n_steps=100)
     >>> bool(sol.diagnostics.casimir_drift < 1e-13)
     True

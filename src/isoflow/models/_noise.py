@@ -1,4 +1,4 @@
-"""The ``noise=`` and ``seed=`` keywords of the models: their transport noise, checked once."""
+"""The ``noise=`` and ``noise_seed=`` keywords of the models: their transport noise."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def transport_noise(
     is taken as the fields themselves. ``seed`` is required with noise."""
     if noise is None and not site:
         return None
-    seed = check_seed(seed, f"{model}: seed")
+    seed = check_seed(seed, f"{model}: noise_seed")
     if noise is None:
         return TransportNoise(seed=seed, **site)
     if isinstance(noise, (int, float, np.integer, np.floating)) and not isinstance(noise, bool):

@@ -83,7 +83,7 @@ def rigid_body(
     d: ArrayLike | None = None,
     W0: ArrayLike | None = None,
     noise: float | ArrayLike | None = None,
-    seed: int | None = None,
+    noise_seed: int | None = None,
 ) -> tuple[IsospectralProblem, Array]:
     r"""The generalized rigid body on :math:`\mathfrak{so}(n)` and its initial state.
 
@@ -145,8 +145,8 @@ def rigid_body(
         orthonormal basis element of :math:`\mathfrak{so}(n)`,
         :math:`\Xi_{(ij)} = \sigma (E_{ij} - E_{ji})/\sqrt2` (for ``n = 3``: random torques
         about the three body axes); an array ``(m, n, n)`` of skew matrices gives the fields.
-    seed : int, optional
-        Seed of the noise's increments (required with ``noise``).
+    noise_seed : int, optional
+        Seed of the noise's increments (required with ``noise``; see :mod:`isoflow.noise`).
 
     Returns
     -------
@@ -255,7 +255,7 @@ def rigid_body(
     parameters: dict[str, Any] = {"n": n, "inertia": plane, "inverse_inertia": c}
     if d_used is not None:
         parameters["d"] = d_used
-    transport = transport_noise("rigid_body", noise, seed, lambda: so_basis(n))
+    transport = transport_noise("rigid_body", noise, noise_seed, lambda: so_basis(n))
     if transport is not None:
         parameters["noise"] = transport.parameters()
     problem = IsospectralProblem(
