@@ -17,7 +17,7 @@ Spellings (one per thing, lower case with hyphens):
   ``"package.module:function"`` (a function returning ``(problem, initial_state)``, its keyword
   arguments from ``params``).
 * **methods** (:data:`METHODS`): ``isomp``, ``spherical-midpoint``, ``classical-midpoint``,
-  ``rk4``, ``isosyrk-1`` .. ``isosyrk-3`` and the compositions ``<base>-<scheme>`` (e.g.
+  ``stochastic-isomp``, ``rk4``, ``isosyrk-1`` .. ``isosyrk-3`` and the compositions ``<base>-<scheme>`` (e.g.
   ``isomp-suzuki-4``, ``spherical-midpoint-kahan-li-8``).
 * **solvers** (:data:`SOLVERS`): ``fixed-point`` (with ``anderson = m`` for Anderson mixing of
   the last ``m`` iterates), ``newton``, ``newton-krylov``. Explicit methods (``rk4``) take none.
@@ -50,7 +50,16 @@ import numpy as np
 
 from ._errors import IsoflowError
 from ._solve import time_grid
-from .methods import RK4, ClassicalMidpoint, Composition, IsoMP, IsoSyRK, Method, SphericalMidpoint
+from .methods import (
+    RK4,
+    ClassicalMidpoint,
+    Composition,
+    IsoMP,
+    IsoSyRK,
+    Method,
+    SphericalMidpoint,
+    StochasticIsoMP,
+)
 from .methods.composition import SCHEMES
 from .nonlinear import FixedPoint, Newton, NonlinearSolver
 from .problems import IsospectralProblem
@@ -377,6 +386,19 @@ def _seed(help_: str = "seed of the random initial data") -> Param:
     return Param(int, 0, help_, low=0)
 
 
+def _noise_seed() -> Param:
+    return Param(int, None, "seed of the noise's increments (required with noise)", low=0)
+
+
+def _thermal() -> dict[str, Param]:
+    """The stochastic Landau-Lifshitz-Gilbert parameters of the spin models."""
+    return {
+        "temperature": Param(float, 0.0, "temperature k_B T (needs damping > 0)", low=0.0),
+        "damping": Param(float, 0.0, "Gilbert damping lambda", low=0.0),
+        "noise_seed": _noise_seed(),
+    }
+
+
 #: Largest matrix size ``n`` of a dense model from the command line (a state of 32 MiB, real).
 DENSE_MAX_N = 2048
 
@@ -387,7 +409,13 @@ MODELS: dict[str, ModelSpec] = {
         ModelSpec(
             "rigid-body",
             "isoflow.models:rigid_body",
-            {"n": _size("matrix size of so(n)", 10, 2, DENSE_MAX_N)},
+            {
+                "n": _size("matrix size of so(n)", 10, 2, DENSE_MAX_N),
+                "noise": Param(
+                    float, None, "transport noise amplitude (one field per basis element)", low=0.0
+                ),
+                "noise_seed": _noise_seed(),
+            },
             "generalized rigid body on so(n), the paper's inertia and W0 (Sec. 3.1)",
             builtin=True,
         ),
@@ -423,6 +451,7 @@ MODELS: dict[str, ModelSpec] = {
                     str, "curve", "'curve' (the paper's) or 'random'", choices=("curve", "random")
                 ),
                 "seed": _seed("seed for initial = 'random'"),
+                **_thermal(),
             },
             "periodic Heisenberg spin chain on (R^3, x)^N (Sec. 3.3)",
             builtin=True,
@@ -447,6 +476,7 @@ MODELS: dict[str, ModelSpec] = {
                     str, "random", "'random' or 'ferro' (a spin wave)", choices=("random", "ferro")
                 ),
                 "seed": _seed(),
+                **_thermal(),
             },
             "classical Heisenberg/XXZ spins with a Zeeman field on a periodic square lattice",
             builtin=True,
@@ -648,6 +678,11 @@ _BASES: dict[str, tuple[Callable[..., Method], str]] = {
 METHODS: dict[str, MethodSpec] = {
     **{name: MethodSpec(name, _plain(cls), text) for name, (cls, text) in _BASES.items()},
     "rk4": MethodSpec("rk4", lambda solver: RK4(), "classical RK4 (explicit)", implicit=False),
+    "stochastic-isomp": MethodSpec(
+        "stochastic-isomp",
+        _plain(StochasticIsoMP),
+        "stochastic isospectral midpoint (models with noise or a temperature)",
+    ),
     **{
         f"isosyrk-{s}": MethodSpec(
             f"isosyrk-{s}",
