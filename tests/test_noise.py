@@ -185,3 +185,21 @@ def test_member_ids_key_the_paths_whatever_the_ensemble_and_the_threads() -> Non
     assert again.ys.tobytes() == whole.ys.tobytes()
     other = dataclasses.replace(noisy, noise=TransportNoise(noisy.noise.fields, seed=4))
     assert not np.array_equal(iso.solve(other, iso.StochasticIsoMP(), Y0, **kw).ys, whole.ys)
+
+
+def test_ensemble_statistics_are_the_members_sample_moments_without_the_failed() -> None:
+    noisy, W0 = _rigid(n=3)
+    Y0 = np.stack([W0] * 6)
+    sol = iso.solve(noisy, iso.StochasticIsoMP(), Y0, dt=0.05, n_steps=10, progress=False)
+    est = iso.ensemble.ensemble_statistics(sol, noisy.hamiltonian)
+    H = noisy.hamiltonian(sol.ys)  # (times, members)
+    assert est.members == 6 and est.failed == 0 and est.mean.shape == (11,)
+    assert np.allclose(est.mean, H.mean(axis=1), rtol=1e-14)
+    assert np.allclose(est.standard_error, H.std(axis=1, ddof=1) / np.sqrt(6), rtol=1e-12)
+    one = dataclasses.replace(sol, failed_step=np.array([-1, 3, -1, -1, -1, -1]))
+    est = iso.ensemble.ensemble_statistics(one, noisy.hamiltonian)
+    assert est.members == 5 and est.failed == 1
+    assert np.allclose(est.mean, np.delete(H, 1, axis=1).mean(axis=1), rtol=1e-14)
+    with pytest.raises(ParameterError, match="at least two members"):
+        iso.ensemble.ensemble_statistics(iso.solve(noisy, iso.StochasticIsoMP(), W0, dt=0.05,
+                                                   n_steps=2, progress=False))  # fmt: skip

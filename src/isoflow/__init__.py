@@ -60,6 +60,7 @@ from .nonlinear import Newton as Newton
 from .problems import IsospectralProblem as IsospectralProblem
 
 if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
+    from . import ensemble as ensemble
     from . import experiments as experiments
     from . import io as io
     from . import models as models
@@ -74,7 +75,8 @@ if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
 
 #: Submodules loaded on first attribute access.
 _LAZY_MODULES = frozenset(
-    {"experiments", "io", "models", "noise", "plotting", "registry", "sphere", "sweep", "threads"}
+    {"ensemble", "experiments", "io", "models", "noise", "plotting", "registry", "sphere", "sweep"}
+    | {"threads"}
 )
 #: Attributes loaded on first access: name -> (module, attribute).
 _LAZY_ATTRIBUTES = {
@@ -136,6 +138,7 @@ __all__ = [
     "UnsupportedAlgebraError",
     "__version__",
     "algebras",
+    "ensemble",
     "experiments",
     "io",
     "models",
