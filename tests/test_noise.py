@@ -203,3 +203,18 @@ def test_ensemble_statistics_are_the_members_sample_moments_without_the_failed()
     with pytest.raises(ParameterError, match="at least two members"):
         iso.ensemble.ensemble_statistics(iso.solve(noisy, iso.StochasticIsoMP(), W0, dt=0.05,
                                                    n_steps=2, progress=False))  # fmt: skip
+
+
+def test_stochastic_vortices_and_sphere_keep_their_casimirs_on_every_path() -> None:
+    x0 = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]])
+    prob, x = iso.models.sphere_vortices(x0, [1.0, 2.0, -0.5], noise=0.3, noise_seed=1)
+    sol = iso.solve(prob, iso.StochasticIsoMP(), np.stack([x] * 3), dt=0.01, n_steps=100,
+                    progress=False)  # fmt: skip
+    assert "point vortices" in sol.stats.runner
+    assert float(np.max(sol.diagnostics.casimir_drift)) < 1e-14
+    assert float(np.abs(sol.ys[-1] - sol.ys[0]).max()) > 0.05
+    prob, Q = iso.models.euler_sphere(12, noise=0.05, noise_seed=2)
+    assert prob.noise.count == 8  # the stream functions of degrees 1 and 2
+    sol = iso.solve(prob, iso.StochasticIsoMP(), Q, dt=0.05, n_steps=20, progress=False)
+    assert "compiled" in sol.stats.runner
+    assert float(np.max(sol.diagnostics.casimir_drift)) < 1e-13

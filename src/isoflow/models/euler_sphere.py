@@ -64,10 +64,16 @@ from ..sphere import (
     random_coefficients,
     vorticity_from_function,
 )
+from ..sphere._basis import basis_matrix
 from ..sphere._operators import check_N
 from ._checks import require_memory
+from ._noise import transport_noise
 
-__all__ = ["coriolis_matrix", "euler_sphere"]
+__all__ = [
+    "coriolis_matrix",
+    "euler_sphere",
+    "large_scale_noise",
+]
 
 Array = NDArray[Any]
 
@@ -93,6 +99,16 @@ def _real_parameter(v: Any, what: str) -> float:
     return float(v)
 
 
+def large_scale_noise(N: int, degrees: tuple[int, ...] = (1, 2)) -> Array:
+    r"""Transport noise by the stream functions :math:`Y_{lm}`, ``l`` in ``degrees``, of unit
+    amplitude: the fields :math:`\hbar^{-1}\, i T_{lm}` (real harmonics), ``(m, N, N)``."""
+    h = hbar(N)
+    fields = [
+        1j * basis_matrix(N, d, m) / h for d in degrees if d <= N - 1 for m in range(-d, d + 1)
+    ]
+    return np.stack(fields)
+
+
 def euler_sphere(
     N: int = 128,
     omega: float = 0.0,
@@ -104,6 +120,8 @@ def euler_sphere(
     slope: float | None = None,
     rms: float = 1.0,
     W0: ArrayLike | None = None,
+    noise: float | ArrayLike | None = None,
+    noise_seed: int | None = None,
 ) -> tuple[IsospectralProblem, Array]:
     r"""Zeitlin's model of the Euler equations on the sphere, and its initial state.
 
@@ -151,6 +169,13 @@ def euler_sphere(
     W0 : array_like, optional
         The initial relative vorticity as matrices ``(*batch, N, N)`` in ``su(N)``, instead of
         ``initial``.
+    noise : float or array_like, optional
+        Stratonovich transport noise on the large scales: a number :math:`\sigma` gives the
+        eight fields of the stream functions :math:`\sigma Y_{lm}`, ``l = 1, 2``
+        (:func:`large_scale_noise`); an array ``(m, N, N)`` in ``u(N)`` gives the fields.
+        Integrate with :class:`~isoflow.StochasticIsoMP`.
+    noise_seed : int, optional
+        Seed of the noise's increments (required with ``noise``).
 
     Returns
     -------
@@ -254,9 +279,13 @@ def euler_sphere(
     parameters: dict[str, Any] = {"N": N, "omega": Om, "hbar": h, "seed": seed_, "initial": kind}
     if kind == "random":  # the spectrum of the random data
         parameters.update(lmin=int(lmin), lmax=lmax_, slope=slope, rms=rms)
+    transport = transport_noise("euler_sphere", noise, noise_seed, lambda: large_scale_noise(N))
+    if transport is not None:
+        parameters["noise"] = transport.parameters()
     problem = IsospectralProblem(
         algebra=alg,
         kernel=kernel,
+        noise=transport,
         hamiltonian=hamiltonian,
         invariants=invariants,
         name=f"Euler equations on the sphere, su({N})" + (f", Omega = {Om:g}" if Om else ""),
