@@ -52,7 +52,7 @@ def _timed_sweep(client: Any, spec: Any, root: Path, name: str) -> tuple[float, 
 
     out = root / name
     t = time.perf_counter()
-    res = iso.sweep(spec, out, client=client, progress=False)
+    res = iso.sweep.run(spec, out, client=client, progress=False)
     wall = time.perf_counter() - t
     assert res.success and len(res.computed) == TASKS, res
     entries = [{"id": t.id, "members": [m.index for m in t.members]} for t in spec.tasks]
@@ -97,7 +97,7 @@ def _load() -> float:
 def _cluster(workers: int) -> tuple[Any, Any]:
     from distributed import Client, LocalCluster
 
-    from isoflow.sweep.run import WORKER_ENV
+    from isoflow.sweep.submit import WORKER_ENV
 
     cluster = LocalCluster(
         n_workers=workers,
@@ -126,7 +126,7 @@ def run(quick: bool) -> list[dict[str, Any]]:
             try:
                 # warm every worker: imports, numba's cached compiled loop, an HDF5 file
                 warm = _spec(20, members, 1e-3)
-                iso.sweep(warm, root / f"warm{workers}", client=client, progress=False)
+                iso.sweep.run(warm, root / f"warm{workers}", client=client, progress=False)
                 walls[workers], busy[workers] = _timed_sweep(
                     client, _spec(n_steps, members, 1e-3), root, f"run{workers}"
                 )

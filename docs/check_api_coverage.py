@@ -96,8 +96,9 @@ def main(argv: list[str]) -> int:
             total += 1
             full = f"{mod}.{name}"
             obj = getattr(module, name, _MISSING)
-            # the same name as a module's (``isoflow.models.rigid_body`` is both the module and,
-            # as an attribute of ``isoflow.models``, its function) counts only for a module
+            # the same name as a module's (``isoflow.experiments.rigid_body`` is both the module
+            # and, as an attribute of ``isoflow.experiments``, its experiment) counts only for a
+            # module
             is_module = isinstance(obj, types.ModuleType)
             if full in inventory and (inventory[full] == "py:module") == is_module:
                 continue

@@ -2,7 +2,7 @@
 A sweep on a LocalCluster
 =========================
 
-``iso.sweep`` runs many members (parameters, seeds or a grid of them) as batched solves on a
+``iso.sweep.run`` runs many members (parameters, seeds or a grid of them) as batched solves on a
 dask.distributed cluster, each task writing its own resumable HDF5 file;
 ``iso.sweep.open_sweep`` reads the results back as one xarray Dataset with a ``member``
 dimension. Sweeps need the extra ``pip install 'isoflow[sweep]'`` (dask, distributed, xarray);
@@ -36,7 +36,7 @@ def run_sweep(out):
         LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster,
         Client(cluster) as client,
     ):
-        iso.sweep(SPEC, out, client=client, progress=False)
+        iso.sweep.run(SPEC, out, client=client, progress=False)
     return iso.sweep.open_sweep(out).sortby("member")
 
 

@@ -32,11 +32,15 @@ ALGEBRA_FACTORIES: dict[str, Callable[[], Algebra]] = {
 #: Spaces that are their own normalizer (Lie algebras closed under the conjugate transpose).
 LIE_KEYS = ("so4", "u3", "su3", "sp4", "sl2", "glR3", "glC3")
 
-#: Every space of the conformance suite: the matrix algebras and the compact vector forms.
+#: Every space of the conformance suite: the matrix algebras, the compact vector forms and
+#: the semidirect products (pairs of fields).
 SPACES: dict[str, Callable[[], Algebra]] = {
     **ALGEBRA_FACTORIES,
     "so3-vectors": lambda: iso.algebras.so3_vectors(3),
     "sl2-vectors": lambda: iso.algebras.sl2_vectors(2),
+    "so3-pairs": lambda: iso.algebras.semidirect(iso.algebras.so(3)),
+    "su3-pairs": lambda: iso.algebras.semidirect(iso.algebras.su(3)),
+    "se3-vectors": iso.algebras.se3_vectors,
 }
 
 
@@ -74,7 +78,8 @@ def hamiltonian_problem(
 
     def grad(W: Array) -> Array:
         q, g = q_and_grad(W)
-        return g * (1.0 + 0.5 * q)[..., None, None] if nonlinear else g
+        factor = (1.0 + 0.5 * q).reshape(q.shape + (1,) * alg.core_ndim)
+        return g * factor if nonlinear else g
 
     return iso.IsospectralProblem.from_hamiltonian(
         alg, H, grad, name=f"{'nonlinear' if nonlinear else 'linear'} LP on {alg.name}"
@@ -119,7 +124,7 @@ def space_problem(key: str, seed: int = 0) -> iso.IsospectralProblem:
 def space_state(alg: Algebra, seed: int, norm: float = 0.8) -> Array:
     """A seeded element of norm ``norm`` (for the vector forms: ``norm`` per particle)."""
     W = alg.random(seed)
-    if alg.shape[-1] == 3 and not isinstance(alg, iso.algebras.MatrixAlgebra):
+    if alg.shape[1:] == (3,) and not isinstance(alg, iso.algebras.MatrixAlgebra):
         return W * (norm / np.linalg.norm(W, axis=-1, keepdims=True))
     return W * (norm / float(alg.norm(W)))
 

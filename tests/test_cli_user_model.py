@@ -127,7 +127,7 @@ def test_entry_point_model_from_the_command_line(
     ep = importlib.metadata.EntryPoint("toy", "user_models:TOY_SPEC", registry.ENTRY_POINT_GROUP)
     # isoflow's reader of the entry points, not importlib's: numba reads its own entry points
     # (with another API) when it first compiles in this process
-    monkeypatch.setattr(registry, "_entry_points", lambda: {"toy": ep})
+    monkeypatch.setattr(registry._catalogue, "entry_points", lambda: {"toy": ep})
     out = str(tmp_path / "toy.h5")
     args = ["run", "toy", "--param", "n=3", "--dt", "0.1", "--n-steps", "30", "--quiet"]
     assert cli.main([*args, "--out", out]) == 0

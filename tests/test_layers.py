@@ -34,7 +34,7 @@ def _loaded_after(code: str) -> list[str]:
     "code",
     [
         "import isoflow",
-        "import isoflow.cli; isoflow.cli._build_parser()",
+        "import isoflow.cli; isoflow.cli.build_parser()",
         "import isoflow.registry",
         "import isoflow as iso; iso.sweep; import isoflow.sweep.spec",  # dask loads when run
     ],
@@ -47,7 +47,7 @@ def test_import_is_light(code: str) -> None:
 
 def test_lazy_attributes_load_on_use() -> None:
     loaded = _loaded_after("import isoflow as iso; iso.io; iso.models.rigid_body; iso.__version__")
-    assert "h5py" in loaded and "isoflow.models.rigid_body" in loaded
+    assert "h5py" in loaded and "isoflow.models._rigid_body" in loaded
     assert "matplotlib" not in loaded
     for name in (
         "io",
@@ -165,11 +165,16 @@ def test_the_cycle_finder_finds_cycles() -> None:
 
 def test_layers_depend_one_way() -> None:
     graph = import_graph()
-    experiments = {m for m in graph if m.startswith("isoflow.experiments")}
-    sweep = {m for m in graph if m.startswith("isoflow.sweep")}
-    app = {"isoflow.cli", "isoflow.plotting", "isoflow.registry", *experiments, *sweep}
+
+    def package(name: str) -> set[str]:
+        return {m for m in graph if m == name or m.startswith(name + ".")}
+
+    experiments = package("isoflow.experiments")
+    cli = package("isoflow.cli")
+    app = {"isoflow.plotting", *cli, *package("isoflow.registry"), *experiments}
+    app |= package("isoflow.sweep")
     for m in experiments:
-        assert "isoflow.plotting" not in graph[m] and "isoflow.cli" not in graph[m], m
+        assert "isoflow.plotting" not in graph[m] and not graph[m] & cli, m
     assert not experiments & graph["isoflow.plotting"] - {"isoflow.experiments"}
     core = {
         m for m in graph if m not in app and not m.startswith(("isoflow.io", "isoflow._compiled"))
@@ -178,14 +183,27 @@ def test_layers_depend_one_way() -> None:
         assert not graph[m] & app, f"{m} imports the application layer: {graph[m] & app}"
 
 
-def test_importing_a_model_module_keeps_the_model_function() -> None:
+def test_no_package_is_callable_or_binds_a_submodule_name_lazily() -> None:
+    """Importing ``package.x`` sets the package's attribute ``x`` to the module. A package that
+    binds its public names lazily (a module ``__getattr__``, as ``isoflow.models`` does) would
+    then answer with the module or the function by import order, so none of those names is a
+    submodule's; and no package swaps its ``__class__`` (to be callable, or to fight this)."""
     code = (
-        "import isoflow as iso\n"
-        "from isoflow.models.brockett import BROCKETT_DEFAULT_SCALE\n"
-        "iso.models.sphere_vortices  # imports hyperbolic_vortices.py for its helpers\n"
-        "import isoflow.models.rigid_body\n"
-        "names = ('brockett', 'hyperbolic_vortices', 'rigid_body', 'sphere_vortices')\n"
-        "assert all(callable(getattr(iso.models, n)) for n in names), names\n"
-        "iso.models.hyperbolic_vortices(config=1)\n"
+        "import importlib, json, pkgutil, types\n"
+        "import isoflow\n"
+        "names = ['isoflow'] + [m.name for m in pkgutil.walk_packages(isoflow.__path__, "
+        "'isoflow.') if m.ispkg]\n"
+        "bad = []\n"
+        "for name in names:\n"
+        "    pkg = importlib.import_module(name)\n"
+        "    if type(pkg) is not types.ModuleType:\n"
+        "        bad.append(f'{name} is a {type(pkg).__name__}')\n"
+        "    lazy = {n for n in getattr(pkg, '__all__', ()) if n not in vars(pkg)}\n"
+        "    for n in lazy & {m.name for m in pkgutil.iter_modules(pkg.__path__)}:\n"
+        "        if not isinstance(getattr(pkg, n), types.ModuleType):\n"
+        "            bad.append(f'{name}.{n} is bound lazily and is also a module')\n"
+        "print(json.dumps(bad))\n"
     )
-    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=120)  # fmt: skip
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []

@@ -7,8 +7,7 @@ import pytest
 
 import isoflow as iso
 from helpers import loglog_slope
-from isoflow.models import ParameterError, brockett
-from isoflow.models.brockett import BROCKETT_DEFAULT_SCALE
+from isoflow.models import BROCKETT_DEFAULT_SCALE, ParameterError, brockett
 
 
 def offdiag(W: np.ndarray) -> np.ndarray:

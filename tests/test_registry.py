@@ -12,6 +12,7 @@ import pytest
 
 import isoflow as iso
 from isoflow import registry
+from isoflow.io.rebuild import check_recorded_model, check_recorded_state
 from isoflow.registry import ConfigError
 
 BASE = {"model": "rigid-body", "params": {"n": 4}, "dt": 0.1, "n_steps": 10}
@@ -98,6 +99,7 @@ def test_size_bounds_refuse_before_building(monkeypatch: pytest.MonkeyPatch) -> 
         BASE | {"model": "spin-chain", "params": {"N": 10**9}},
         BASE | {"model": "euler-sphere", "params": {"N": 100000}},
         BASE | {"model": "spin-lattice", "params": {"shape": [10**5, 10**5]}},
+        BASE | {"model": "mhd-sphere", "params": {"N": 4096}},
     ):
         with pytest.raises(ConfigError, match="must be <="):
             registry.build(cfg)
@@ -119,7 +121,7 @@ def test_list_parameters() -> None:
 def test_every_builtin_model_builds_with_its_defaults_and_checks_them() -> None:
     small = {
         "rigid-body": {"n": 3}, "brockett": {"n": 3}, "toda": {"n": 3}, "spin-chain": {"N": 4},
-        "euler-sphere": {"N": 4}, "spin-lattice": {"shape": [3, 3]},
+        "euler-sphere": {"N": 4}, "spin-lattice": {"shape": [3, 3]}, "mhd-sphere": {"N": 4},
     }  # fmt: skip
     for name, spec in registry.MODELS.items():
         cfg = {"model": name, "params": small.get(name, {}), "dt": 0.01, "n_steps": 2}
@@ -224,17 +226,17 @@ def test_recorded_model_check() -> None:
     recorded = registry.normalize_config(
         BASE | {"model": spec.name, "params": {"n": 3, "seed": 2}}, model=spec
     )
-    assert registry.check_recorded_model(recorded, spec, {"n": 3})["params"] == {"n": 3, "seed": 2}
+    assert check_recorded_model(recorded, spec, {"n": 3})["params"] == {"n": 3, "seed": 2}
     with pytest.raises(ConfigError, match="written by model 'user_models:toy_rigid_body', not"):
-        registry.check_recorded_model(recorded, registry.load_model("user_models:compiled_toy"))
+        check_recorded_model(recorded, registry.load_model("user_models:compiled_toy"))
     with pytest.raises(ConfigError, match="n = 4 differs from the run's n = 3"):
-        registry.check_recorded_model(recorded, spec, {"n": 4})
+        check_recorded_model(recorded, spec, {"n": 4})
     problem, y0, _, _ = registry.build(recorded, model=spec)
-    registry.check_recorded_state({"algebra": "so(3)", "state_shape": [3, 3]}, problem, y0)
+    check_recorded_state({"algebra": "so(3)", "state_shape": [3, 3]}, problem, y0)
     with pytest.raises(ConfigError, match="file's run was on so"):
-        registry.check_recorded_state({"algebra": "so(4)", "state_shape": [4, 4]}, problem, y0)
+        check_recorded_state({"algebra": "so(4)", "state_shape": [4, 4]}, problem, y0)
     with pytest.raises(ConfigError, match="shape"):
-        registry.check_recorded_state({"algebra": "so(3)", "state_shape": [2, 3, 3]}, problem, y0)
+        check_recorded_state({"algebra": "so(3)", "state_shape": [2, 3, 3]}, problem, y0)
 
 
 def test_resume_of_a_user_model_file_imports_nothing(tmp_path: Path) -> None:
@@ -252,6 +254,39 @@ def test_resume_of_a_user_model_file_imports_nothing(tmp_path: Path) -> None:
     # named again by the caller: resumes (a complete run changes nothing)
     sol = io.resume(path, problem=problem, method=method)
     assert sol.success and np.array_equal(io.load(path).ys[-1], sol.ys[-1])
+    # or by its name (its module imported now), parameters given again checked against the file
+    with pytest.raises(ConfigError, match=r"parameter n = 5 differs from the run's n = 4"):
+        io.resume(path, model=spec.name, params={"n": 5})
+    with pytest.raises(ConfigError, match=r"written by model 'user_models:toy_rigid_body', not"):
+        io.resume(path, model="user_models:compiled_toy")
+    with pytest.raises(iso.ParameterError, match=r"^model= and params= rebuild the run's problem"):
+        io.resume(path, problem=problem, method=method, model=spec)
+    sol = io.resume(path, model=spec.name, params={"n": 4})
+    assert sol.success and sol.ys[-1].tobytes() == io.load(path).ys[-1].tobytes()
+
+
+def test_layered_config_puts_the_options_over_the_file(tmp_path: Path) -> None:
+    f = tmp_path / "run.toml"
+    f.write_text(
+        'model = "toda"\nmethod = "rk4"\nt1 = 1.0\ndt = 0.1\nout = "a.h5"\n'
+        "[params]\nn = 5\nseed = 3\n"
+    )
+    spec, cfg, out = registry.layered_config(
+        f, params=[("n", "7"), ("n", "6")], options={"dt": 0.05, "method": None}
+    )
+    assert spec is registry.MODELS["toda"] and out == "a.h5"
+    assert cfg["params"] == {"n": 6, "seed": 3} and cfg["method"] == "rk4"
+    assert (cfg["t1"], cfg["dt"]) == (1.0, 0.05)
+    _, cfg, _ = registry.layered_config(f, options={"dt": 0.2, "n_steps": 3})
+    assert "t1" not in cfg and (cfg["dt"], cfg["n_steps"]) == (0.2, 3)  # two replace two
+    _, cfg, _ = registry.layered_config(f, model="rigid-body")  # the file's params are toda's
+    assert cfg["model"] == "rigid-body" and cfg["params"] == {"n": 10}
+    with pytest.raises(ConfigError, match=r"toda n must be an integer, got 'six'"):
+        registry.layered_config(f, params=[("n", "six")])
+    with pytest.raises(ConfigError, match=r"^name a model \(isoflow run MODEL"):
+        registry.layered_config(None)
+    with pytest.raises(ConfigError, match=r"no such configuration file$"):
+        registry.layered_config(tmp_path / "missing.toml", model="toda")
 
 
 def test_experiment_names() -> None:
@@ -279,6 +314,18 @@ _INITIAL_CASES = {
         {"N": 6},
         {"seed": 3, "lmin": 2, "lmax": 4, "slope": -1.0, "rms": 2.0},
     ),
+    "mhd-sphere": (
+        {"N": 6},
+        {
+            "seed": 3,
+            "lmin": 2,
+            "lmax": 4,
+            "slope": -1.0,
+            "kinetic_energy": 0.1,
+            "magnetic_energy": 0.4,
+        },
+    ),
+    "heavy-top": ({"top": "kovalevskaya"}, {"M0": [0.1, 0.2, 0.3], "Gamma0": [0.0, 0.6, 0.8]}),
 }
 
 
@@ -332,7 +379,8 @@ def test_initial_parameters_change_only_the_initial_state(name: str) -> None:
 @pytest.mark.parametrize(
     ("name", "base", "key", "value"),
     [("brockett", {"n": 4}, "n", 5), ("euler-sphere", {"N": 6}, "omega", 1.0),
-     ("spin-lattice", {"shape": [3, 4]}, "J", 2.0), ("hyperbolic-vortices", {}, "config", 2)],
+     ("spin-lattice", {"shape": [3, 4]}, "J", 2.0), ("hyperbolic-vortices", {}, "config", 2),
+     ("mhd-sphere", {"N": 6}, "omega", 1.0), ("heavy-top", {}, "mgl", 2.0)],
 )  # fmt: skip
 def test_the_dynamics_check_can_fail(name: str, base: dict, key: str, value: object) -> None:
     spec = registry.MODELS[name]

@@ -56,7 +56,7 @@ def client():
     import dask
     from distributed import Client, LocalCluster
 
-    from isoflow.sweep.run import WORKER_ENV
+    from isoflow.sweep.submit import WORKER_ENV
 
     old = os.environ.get("PYTHONPATH")
     os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (TESTS, old) if p)
@@ -232,16 +232,15 @@ def test_cli_bad_sweep_file_exits_1_with_one_line(
     assert not (tmp_path / "o").exists()
 
 
-def test_iso_sweep_is_callable_after_importing_a_submodule() -> None:
-    code = (
-        "import isoflow as iso\nimport isoflow.sweep.spec\nimport isoflow.sweep.task\n"
-        "assert callable(iso.sweep) and iso.sweep.read_spec is isoflow.sweep.spec.read_spec\n"
-        "try:\n    iso.sweep({'model': 'rigid-body'}, 'x')\n"
-        "except iso.sweep.SweepError as e:\n    print(e)\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, timeout=120)  # fmt: skip
-    assert "the sweep has no members" in out.stdout
+def test_iso_sweep_run_is_the_function_after_importing_every_submodule() -> None:
+    import isoflow.sweep.spec
+    import isoflow.sweep.submit
+    import isoflow.sweep.task
+
+    assert iso.sweep.run is isoflow.sweep.submit.run and not callable(iso.sweep)
+    assert iso.sweep.read_spec is isoflow.sweep.spec.read_spec
+    with pytest.raises(iso.sweep.SweepError, match="the sweep has no members"):
+        iso.sweep.run({"model": "rigid-body"}, "x")
 
 
 def test_a_factory_with_its_own_seed_is_swept_over_it() -> None:
@@ -267,7 +266,7 @@ for name in ("dask", "distributed", "xarray"):
 import isoflow as iso
 from isoflow.cli import main
 out = {{}}
-for what, call in (("sweep", lambda: iso.sweep({str(f)!r}, {str(tmp_path / "o")!r})),
+for what, call in (("sweep", lambda: iso.sweep.run({str(f)!r}, {str(tmp_path / "o")!r})),
                    ("open", lambda: iso.sweep.open_sweep({str(tmp_path)!r}))):
     try:
         call()
@@ -295,15 +294,15 @@ print(json.dumps(out))
 def test_more_workers_than_cores_are_capped_with_a_warning(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from isoflow.cli import _warnings_as_lines
-    from isoflow.sweep.run import _capped_workers
+    from isoflow.cli._common import warnings_as_lines
+    from isoflow.sweep.submit import _capped_workers
     from isoflow.threads import available_cores
 
     cores = available_cores()
     with pytest.warns(RuntimeWarning, match=f"workers = 999 is more than the {cores} cores"):
         assert _capped_workers(999) == cores
     assert _capped_workers(None) == cores and _capped_workers(1) == 1
-    with _warnings_as_lines():  # as isoflow sweep shows it
+    with warnings_as_lines():  # as isoflow sweep shows it
         assert _capped_workers(999) == cores
     err = capsys.readouterr().err
     assert err.startswith(f"isoflow: warning: workers = 999 is more than the {cores} cores")
@@ -633,18 +632,22 @@ def test_a_scheduler_address_that_is_not_a_scheduler_is_one_line(
          "grid": {"seed": [0, 1, 2], "scale": [0.5, 1.0]}, "members_per_task": 4},
         {"model": "toda", "params": {"n": 5}, "method": "isomp", "solver": "newton", "dt": 0.1,
          "t1": 5.0, "save_every": 10, "grid": {"seed": {"start": 0, "stop": 4}}},
+        {"model": "mhd-sphere", "params": {"N": 5, "lmax": 3}, "dt": 0.05, "n_steps": 40,
+         "save_every": 10, "grid": {"seed": [0, 1, 2]}, "members_per_task": 2},
+        {"model": "heavy-top", "params": {"top": "kovalevskaya"}, "dt": 0.01, "n_steps": 100,
+         "save_every": 25, "perturb": 1e-2, "grid": {"seed": {"start": 0, "stop": 3}}},
     ],
-    ids=["perturbed-rigid-body", "brockett", "toda"],
+    ids=["perturbed-rigid-body", "brockett", "toda", "mhd-sphere", "perturbed-heavy-top"],
 )  # fmt: skip
 def test_every_member_equals_a_serial_solve(client, tmp_path: Path, table: dict) -> None:
     spec = read_spec(table)
-    res = iso.sweep(spec, tmp_path / "s", client=client, progress=False)
+    res = iso.sweep.run(spec, tmp_path / "s", client=client, progress=False)
     assert res.success and sorted(res.computed) == sorted(t.id for t in spec.tasks)
     _assert_members_are_serial_runs(spec, tmp_path / "s")
     ds = open_sweep(tmp_path / "s")
     assert set(ds.status.values) == {"finished"}
     assert sorted(ds.member.values) == list(range(len(spec.members)))
-    again = iso.sweep(spec, tmp_path / "s", client=client, progress=False)
+    again = iso.sweep.run(spec, tmp_path / "s", client=client, progress=False)
     assert again.computed == [] and len(again.skipped) == len(spec.tasks)
 
 
@@ -654,7 +657,7 @@ def test_open_sweep_is_lazy_and_reads_each_file_once(
     import dask
 
     spec = read_spec(RIGID)
-    iso.sweep(spec, tmp_path, client=client, progress=False)
+    iso.sweep.run(spec, tmp_path, client=client, progress=False)
     calls: list[str] = []
     real = sweep_results.read_task
 
@@ -703,7 +706,7 @@ def test_failing_member_and_raising_task_are_reported_others_finish(
     toy = {"model": "user_models:toy_rigid_body", "dt": 0.1, "n_steps": 10,
            "members": [{"n": 0}, {"n": 3}]}  # fmt: skip
     spec = read_spec(toy)
-    res = iso.sweep(spec, tmp_path / "raise", client=client, progress=False)
+    res = iso.sweep.run(spec, tmp_path / "raise", client=client, progress=False)
     bad, good = spec.tasks
     assert list(res.errors) == [bad.id] and "ParameterError" in res.errors[bad.id]
     assert res.computed == [good.id]
@@ -734,7 +737,7 @@ def _truncate(path: Path) -> None:
 
 def test_a_rerun_redoes_every_task_whose_files_do_not_hold(client, tmp_path: Path) -> None:
     spec = read_spec(RIGID | {"members_per_task": 1, "grid": {"seed": {"start": 0, "stop": 6}}})
-    iso.sweep(spec, tmp_path, client=client, progress=False)
+    iso.sweep.run(spec, tmp_path, client=client, progress=False)
     t = [task_paths(tmp_path, task.id) for task in spec.tasks]
     ids = [task.id for task in spec.tasks]
     t[0].json.unlink()  # the summary deleted: resumed from the complete file
@@ -746,7 +749,7 @@ def test_a_rerun_redoes_every_task_whose_files_do_not_hold(client, tmp_path: Pat
     forged = json.loads(t[5].json.read_text())
     forged["status"] = ["failed"]
     t[5].json.write_text(json.dumps(forged))
-    res = iso.sweep(spec, tmp_path, client=client, progress=False)
+    res = iso.sweep.run(spec, tmp_path, client=client, progress=False)
     assert res.skipped == [] and sorted(res.computed) == sorted(ids) and res.success
     assert sorted(res.redone) == sorted([ids[1], ids[2], ids[3], ids[5]])
     assert "result file" in res.redone[ids[1]] and "is missing" in res.redone[ids[1]]
@@ -762,7 +765,7 @@ def test_tasks_are_submitted_lazily_and_progress_is_printed(
     client, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """At most the in-flight bound of tasks is ever waiting, each carrying its own members."""
-    from isoflow.sweep import run as sweep_run
+    from isoflow.sweep import submit as sweep_submit
 
     class Watching:
         def __init__(self) -> None:
@@ -780,10 +783,10 @@ def test_tasks_are_submitted_lazily_and_progress_is_printed(
             self.futures.append(fut)
             return fut
 
-    monkeypatch.setattr(sweep_run, "_in_flight", lambda c: 2)
+    monkeypatch.setattr(sweep_submit, "_in_flight", lambda c: 2)
     spec = read_spec(RIGID | {"members_per_task": 1, "n_steps": 40})
     watching = Watching()
-    res = iso.sweep(spec, tmp_path, client=watching, progress=True)
+    res = iso.sweep.run(spec, tmp_path, client=watching, progress=True)
     assert res.success and len(res.computed) == len(spec.tasks) == 5
     assert watching.members == [1] * 5 and watching.most == 2
     err = capsys.readouterr().err.splitlines()
@@ -858,7 +861,9 @@ def test_worker_killed_mid_task_is_retried_and_resumed(client, tmp_path: Path) -
     spec = read_spec(LONG)
     out: dict = {}
     th = threading.Thread(
-        target=lambda: out.update(r=iso.sweep(spec, tmp_path / "k", client=client, progress=False))
+        target=lambda: out.update(
+            r=iso.sweep.run(spec, tmp_path / "k", client=client, progress=False)
+        )
     )
     th.start()
     tid, pid = _running_task(tmp_path / "k", spec)
@@ -868,7 +873,7 @@ def test_worker_killed_mid_task_is_retried_and_resumed(client, tmp_path: Path) -
     assert res.success and len(res.computed) == len(spec.tasks)
     log = task_paths(tmp_path / "k", tid).log.read_text()
     assert log.count("start:") == 1 and "resumed" in log, log
-    iso.sweep(spec, tmp_path / "ref", client=client, progress=False)
+    iso.sweep.run(spec, tmp_path / "ref", client=client, progress=False)
     _assert_same_results(tmp_path / "k", tmp_path / "ref")
 
 
@@ -913,5 +918,5 @@ def test_client_killed_and_restarted_finishes_like_an_uninterrupted_run(
         assert task_paths(d, tid).json.read_text() == text
     logs = {t.id: _read_log(d, t.id) for t in spec.tasks}
     assert any("resumed" in text for text in logs.values()), logs
-    iso.sweep(spec, tmp_path / "ref", client=client, progress=False)
+    iso.sweep.run(spec, tmp_path / "ref", client=client, progress=False)
     _assert_same_results(d, tmp_path / "ref")

@@ -157,8 +157,8 @@ def canonical_names(modules: list[types.ModuleType]) -> dict[tuple[str, str], st
         # ``isoflow.methods.isomp.IsoMP``); among equally short ones, the module it comes from
         home_module = _public_prefix(getattr(obj, "__module__", "") or "")
         candidates = sorted({mod for mod, _, _ in entries if mod in names})
-        # not a name that is also a module's (``isoflow.models.rigid_body`` is the module; its
-        # function is described as ``isoflow.models.rigid_body.rigid_body``)
+        # not a name that is also a module's (``isoflow.experiments.rigid_body`` is the module;
+        # its experiment is described as ``isoflow.experiments.rigid_body.rigid_body``)
         free = [m for m, n, _ in entries if m in names and f"{m}.{n}" not in names]
         candidates = sorted(set(free)) or candidates
         home = min(
@@ -219,9 +219,12 @@ def write_api_pages(app: Any = None) -> list[str]:
                     lines += [f".. autofunction:: {name}", ""]
                 else:
                     lines += [f".. autodata:: {name}", "   :no-value:", ""]
-                    if not _has_doc_comment(module, name):
-                        lines += [f"   Exported constant ``{mod}.{name}`` ({type(obj).__name__}).",
-                                  ""]  # fmt: skip
+                    if _doc_comment(module, name) is None:  # autodoc reads this source only
+                        comment = _defining_comment(module, name, obj)
+                        text = comment or [
+                            f"Exported constant ``{mod}.{name}`` ({type(obj).__name__})."
+                        ]
+                        lines += [f"   {line}".rstrip() for line in text] + [""]
         page = API_DIR / f"{mod}.rst"
         _write_if_changed(page, "\n".join(lines) + "\n")
         written.add(page.name)
@@ -249,17 +252,34 @@ def write_api_pages(app: Any = None) -> list[str]:
     return [m.__name__ for m in modules]
 
 
-def _has_doc_comment(module: types.ModuleType, name: str) -> bool:
-    """Whether ``name`` is assigned with a ``#:`` comment in the module's source."""
+def _doc_comment(module: types.ModuleType, name: str) -> list[str] | None:
+    """The ``#:`` comment lines above the assignment of ``name`` in the module's source."""
     try:
         source = inspect.getsource(module)
     except (OSError, TypeError):
-        return False
+        return None
     lines = source.splitlines()
     for i, line in enumerate(lines):
         if line.startswith((f"{name} =", f"{name}:")) and i > 0 and lines[i - 1].startswith("#:"):
-            return True
-    return False
+            start = i
+            while start > 0 and lines[start - 1].startswith("#:"):
+                start -= 1
+            return [ln[2:].strip() for ln in lines[start:i]]
+    return None
+
+
+def _defining_comment(module: types.ModuleType, name: str, obj: Any) -> list[str] | None:
+    """The ``#:`` comment of a constant that ``module`` re-exports from one of its own
+    submodules (``isoflow.registry.MODELS`` is defined in ``isoflow.registry._catalogue``), where
+    autodoc, reading only ``module``'s source, does not look."""
+    prefix = module.__name__ + "."
+    for other in sorted(n for n in sys.modules if n.startswith(prefix)):
+        mod = sys.modules[other]
+        if mod is not None and getattr(mod, name, _MISSING) is obj:
+            comment = _doc_comment(mod, name)
+            if comment is not None:
+                return comment
+    return None
 
 
 def _write_if_changed(path: Path, text: str) -> None:
@@ -514,9 +534,22 @@ def _fmt(value: Any) -> str:
     return "" if value is None else str(value)
 
 
+def drop_type_docstrings(
+    app: Any, what: str, name: str, obj: Any, options: Any, lines: list
+) -> None:
+    """Drop the docstring of a constant's type (``int([x]) -> integer ...``), which autodoc
+    shows for a constant without a ``#:`` comment in the module it reads (one re-exported from
+    another module): the page gives the comment found where it is defined, or says what the
+    constant is (:func:`write_api_pages`)."""
+    doc = getattr(type(obj), "__doc__", None)
+    if what == "data" and doc and " ".join(" ".join(lines).split()) == " ".join(doc.split()):
+        lines.clear()
+
+
 def setup(app: Any) -> dict[str, Any]:
     app.connect("builder-inited", write_api_pages)
     app.connect("missing-reference", resolve_short_names)
     app.connect("autodoc-process-docstring", escape_type_stars, priority=400)
+    app.connect("autodoc-process-docstring", drop_type_docstrings, priority=300)
     app.add_directive("benchmark-table", BenchmarkTable)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

@@ -11,9 +11,9 @@ symplectic method for isospectral flows*. Quick start::
 Importing the package loads the numerical core only (spaces, problems, methods, solvers, the
 time loop, diagnostics). The rest loads on first use (PEP 562): ``iso.models``, ``iso.sphere``,
 ``iso.threads``, ``iso.io`` (HDF5), ``iso.registry``, ``iso.experiments``, ``iso.plotting``
-(matplotlib), ``iso.sweep`` (sweeps on dask.distributed; callable as
-``iso.sweep("sweep.toml", "out")``) and ``iso.reference_solution`` (SciPy's integrators); numba
-loads when a run first takes a compiled path.
+(matplotlib), ``iso.sweep`` (sweeps on dask.distributed: ``iso.sweep.run("sweep.toml",
+"out")``) and ``iso.reference_solution`` (SciPy's integrators); numba loads when a run first
+takes a compiled path.
 """
 
 from __future__ import annotations

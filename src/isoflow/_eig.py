@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["eigvalsh", "skew_eigvalsh"]
+__all__ = ["eigh_diagonal", "eigvalsh", "skew_eigvalsh"]
 
 
 #: Smallest stack whose eigenvalues are spread over numba threads (from the main thread only:
@@ -61,6 +61,29 @@ def skew_eigvalsh(W: Any) -> NDArray[np.float64]:
         W = W.astype(np.float64)
     flat = _stack(W)
     return _run(skew_eigvalsh_stack, skew_eigvalsh_stack_parallel, flat).reshape(W.shape[:-1])
+
+
+def eigh_diagonal(A: Any, B: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    r"""Eigenvalues of the Hermitian ``A`` and the diagonal of ``B`` in its eigenvectors.
+
+    For stacks ``(..., n, n)`` of Hermitian ``A`` and ``B``: the ascending eigenvalues
+    :math:`\lambda_i` of ``A`` and :math:`d_i = \operatorname{Re}(U^\dagger B U)_{ii}` with ``U``
+    the unit eigenvectors (LAPACK's ``heevd`` through numba, without the GIL, like
+    :func:`eigvalsh`). Sums :math:`\sum_i d_i f(\lambda_i) = \operatorname{Tr}(B f(A))` do not
+    depend on the choice of eigenvectors within a repeated eigenvalue; the single :math:`d_i`
+    do. (Used for the cross Casimirs :math:`\operatorname{Tr}(W\Theta^k)` of the semidirect
+    products, :mod:`isoflow.algebras.semidirect`.)
+    """
+    from ._eig_compiled import eigh_diagonal_stack
+
+    A = np.asarray(A, dtype=np.complex128)
+    B = np.asarray(B, dtype=np.complex128)
+    flat_a, flat_b = _stack(A), _stack(np.broadcast_to(B, A.shape))
+    lam = np.empty(flat_a.shape[:2])
+    d = np.empty(flat_a.shape[:2])
+    if flat_a.shape[0]:
+        eigh_diagonal_stack(flat_a, flat_b, lam, d)
+    return lam.reshape(A.shape[:-1]), d.reshape(A.shape[:-1])
 
 
 def _stack(A: NDArray[Any]) -> NDArray[Any]:

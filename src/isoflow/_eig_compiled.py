@@ -8,6 +8,7 @@ import numba
 import numpy as np
 
 __all__ = [
+    "eigh_diagonal_stack",
     "eigvalsh_stack",
     "eigvalsh_stack_parallel",
     "skew_eigvalsh_stack",
@@ -129,3 +130,19 @@ skew_eigvalsh_stack_parallel = numba.njit(cache=True, nogil=True, parallel=True)
     _skew_loop_parallel
 )
 skew_eigvalsh_stack_parallel.__doc__ = "The same over numba threads (large stacks, main thread)."
+
+
+@numba.njit(cache=True, nogil=True)
+def eigh_diagonal_stack(A, B, lam, d):  # type: ignore[no-untyped-def]
+    """``lam[m], U = eigh(A[m])`` and ``d[m, i] = Re (U^H B[m] U)_ii`` for every matrix, without
+    the GIL (see :func:`isoflow._eig.eigh_diagonal`)."""
+    n = A.shape[1]
+    for m in range(A.shape[0]):
+        w, U = np.linalg.eigh(A[m])
+        BU = B[m] @ U
+        for i in range(n):
+            acc = 0.0
+            for k in range(n):
+                acc += (U[k, i].conjugate() * BU[k, i]).real
+            lam[m, i] = w[i]
+            d[m, i] = acc

@@ -27,16 +27,19 @@ __all__ = [
     "elementwise",
     "elementwise_in_frame",
     "field_type",
+    "heavy_top",
     "neighbour_sum",
     "vortex_hyperbolic",
     "vortex_sphere",
 ]
 
 
-def field_type(f: Any, args: tuple[Any, ...], dtype: Any, out_dtype: Any) -> Any:
+def field_type(f: Any, args: tuple[Any, ...], dtype: Any, out_dtype: Any, ndim: int = 2) -> Any:
     """The function type ``void(W, out, *args)`` of a field, with ``f`` compiled for it.
 
-    ``W`` and ``out`` are C-contiguous 2-d arrays of ``dtype`` and ``out_dtype``.
+    ``W`` and ``out`` are C-contiguous arrays of ``dtype`` and ``out_dtype`` with ``ndim``
+    axes, those of one state (2 for matrices and particle arrays, 3 for the pairs of matrices
+    of :func:`isoflow.algebras.semidirect`).
 
     Raises
     ------
@@ -44,8 +47,8 @@ def field_type(f: Any, args: tuple[Any, ...], dtype: Any, out_dtype: Any) -> Any
         ``f`` does not compile for these argument types (wrong number of arguments, writes a
         complex value into a real ``out``, ...), with numba's first message.
     """
-    W_t = types.Array(numba.from_dtype(np.dtype(dtype)), 2, "C")
-    out_t = types.Array(numba.from_dtype(np.dtype(out_dtype)), 2, "C")
+    W_t = types.Array(numba.from_dtype(np.dtype(dtype)), ndim, "C")
+    out_t = types.Array(numba.from_dtype(np.dtype(out_dtype)), ndim, "C")
     args_t = numba.typeof(args)
     sig = types.void(W_t, out_t, *args_t.types)
     if sig.args in f.overloads:  # compiled earlier: skip numba's compiler lock
@@ -77,13 +80,13 @@ _APPLY: dict[Any, Any] = {}
 
 def apply_field(f: Any, args: tuple[Any, ...], W: Any, out: Any) -> None:
     """``f(W[m], out[m], *args)`` for every member ``m`` of the stacked ``(M, ...)`` states."""
-    f_t = field_type(f, args, W.dtype, out.dtype)
+    f_t = field_type(f, args, W.dtype, out.dtype, W.ndim - 1)
     args_t = numba.typeof(args)
     sig = types.none(
         f_t,
         args_t,
-        types.Array(numba.from_dtype(W.dtype), 3, "C"),
-        types.Array(numba.from_dtype(out.dtype), 3, "C"),
+        types.Array(numba.from_dtype(W.dtype), W.ndim, "C"),
+        types.Array(numba.from_dtype(out.dtype), W.ndim, "C"),
     )
     run = _APPLY.get(sig)
     if run is None:
@@ -180,3 +183,13 @@ def vortex_hyperbolic(W, out, circ, c):  # type: ignore[no-untyped-def]
     flat = np.empty(3 * N)  # any layouts of W and out: the pair sum runs on flat copies
     pair_field(np.ascontiguousarray(W).ravel(), flat, circ, c, N, True)
     out[:, :] = flat.reshape(N, 3)
+
+
+@numba.njit(cache=True)
+def heavy_top(W, out, inv_inertia, gravity):  # type: ignore[no-untyped-def]
+    r"""The heavy top's ``B = -(I^{-1} M, gravity)`` on the pair ``W = (Gamma, M)`` (``(2, 3)``):
+    ``gravity`` is :math:`\partial H/\partial\Gamma = m g l\,\chi`
+    (:func:`isoflow.models.heavy_top`)."""
+    for a in range(3):
+        out[0, a] = -inv_inertia[a] * W[1, a]
+        out[1, a] = -gravity[a]

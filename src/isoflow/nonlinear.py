@@ -55,6 +55,7 @@ from ._errors import ParameterError
 from .algebras import Algebra
 
 __all__ = [
+    "ANDERSON_MAX",
     "CONTINUE",
     "STATUS_CONVERGED",
     "STATUS_DIVERGED",
@@ -80,6 +81,10 @@ CONTINUE = -1
 
 #: Regularization of Anderson's normal equations, relative to their largest diagonal entry.
 ANDERSON_REGULARIZATION = 1e-12
+
+#: Largest Anderson memory of :class:`FixedPoint` (the one statement of the bound: the run
+#: configurations, ``isoflow run --anderson`` and ``isoflow demo --anderson`` check against it).
+ANDERSON_MAX = 8
 
 
 def stopping_step(
@@ -415,9 +420,10 @@ class FixedPoint(NonlinearSolver):
     divergence_factor : float
         Growth of the residual over its first value that counts as divergence.
     anderson : int
-        Anderson memory ``m`` (0: the plain iteration; see the module docstring). Mixing the
-        last ``m`` iterates costs ``O(m)`` inner products per iteration and usually saves
-        iterations when many are needed (large ``h ||B||``, tight tolerances).
+        Anderson memory ``m`` from 0 (the plain iteration) to :data:`ANDERSON_MAX`; see the
+        module docstring. Mixing the last ``m`` iterates costs ``O(m)`` inner products per
+        iteration and usually saves iterations when many are needed (large ``h ||B||``, tight
+        tolerances).
     """
 
     rtol: float = 1e-14
@@ -432,8 +438,14 @@ class FixedPoint(NonlinearSolver):
             self.rtol, self.atol, self.max_iter, self.stall_rtol, self.divergence_factor
         ).check()
         m = self.anderson
-        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or not 0 <= m <= 8:
-            raise ParameterError(f"anderson must be an integer memory in [0, 8], got {m!r}")
+        if (
+            isinstance(m, bool)
+            or not isinstance(m, (int, np.integer))
+            or not 0 <= m <= ANDERSON_MAX
+        ):
+            raise ParameterError(
+                f"anderson must be an integer memory in [0, {ANDERSON_MAX}], got {m!r}"
+            )
 
     def _update(self, prob: FixedPointProblem, X: Array, GX: Array, mask: Array | None) -> Array:
         return GX

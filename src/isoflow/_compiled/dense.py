@@ -44,7 +44,9 @@ __all__ = [
     "DenseSmall",
     "dense_layout",
     "lower_blocks",
+    "mirror_sum",
     "packed_row_offsets",
+    "product",
     "remove_trace",
     "sigma_sign",
 ]
@@ -126,8 +128,9 @@ def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _mirror_sum(lay, C):  # type: ignore[no-untyped-def]
-    """``C = P + sigma(P)`` in place (``C`` holds ``P``), pair by pair."""
+def mirror_sum(lay, C):  # type: ignore[no-untyped-def]
+    """``C = P + sigma(P)`` in place (``C`` holds ``P``), pair by pair (``lay``: any record
+    with ``n`` and the sign ``s`` of sigma; also the pair layouts' brackets)."""
     n = lay.n
     s = lay.s
     Cm = C.reshape((n, n))
@@ -142,8 +145,8 @@ def _mirror_sum(lay, C):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)
-def _product(n, A, B, out):  # type: ignore[no-untyped-def]
-    """``out = A B`` (written out, ``n x n`` views)."""
+def product(n, A, B, out):  # type: ignore[no-untyped-def]
+    """``out = A B`` (written out, ``n x n`` views; also the pair layouts' small products)."""
     for i in range(n):
         for j in range(n):
             out[i, j] = 0.0
@@ -158,16 +161,16 @@ def _bracket_triple_small(lay, B, X, C, T):  # type: ignore[no-untyped-def]
     n = lay.n
     Bm = B.reshape((n, n))
     Cm = C.reshape((n, n))
-    _product(n, Bm, X.reshape((n, n)), Cm)
-    _product(n, Cm, Bm, T.reshape((n, n)))
-    _mirror_sum(lay, C)
+    product(n, Bm, X.reshape((n, n)), Cm)
+    product(n, Cm, Bm, T.reshape((n, n)))
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always")
 def _bracket_small(lay, B, X, C):  # type: ignore[no-untyped-def]
     n = lay.n
-    _product(n, B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
-    _mirror_sum(lay, C)
+    product(n, B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always")
@@ -177,14 +180,14 @@ def _bracket_triple_blas(lay, B, X, C, T):  # type: ignore[no-untyped-def]
     Cm = C.reshape((n, n))
     np.dot(Bm, X.reshape((n, n)), Cm)
     np.dot(Cm, Bm, T.reshape((n, n)))
-    _mirror_sum(lay, C)
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always")
 def _bracket_blas(lay, B, X, C):  # type: ignore[no-untyped-def]
     n = lay.n
     np.dot(B.reshape((n, n)), X.reshape((n, n)), C.reshape((n, n)))
-    _mirror_sum(lay, C)
+    mirror_sum(lay, C)
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)

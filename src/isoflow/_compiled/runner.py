@@ -11,7 +11,9 @@ method's own code, :class:`~isoflow._stepping.PythonRunner`). A compiled path ex
   ``so(n)``, ``u(n)``, ``su(n)``, ``Sym(n)``, ``Herm(n)`` (:mod:`.dense`; ensembles of an
   elementwise kernel as SIMD lanes, :mod:`.lanes`), :math:`(\mathbb{R}^3,\times)^N` and
   :math:`(\mathbb{R}^3,\times_L)^N` (:mod:`.particles`; point vortices, :mod:`.vortices`; spin
-  chains, :mod:`.spin_chain`); single systems and ensembles (units over numba threads).
+  chains, :mod:`.spin_chain`), the semidirect products of ``so(n)``, ``u(n)``, ``su(n)`` and
+  the heavy top's :math:`\mathfrak{se}(3)` (:mod:`.pairs`); single systems and ensembles
+  (units over numba threads).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from . import driver
 from .dense import DenseBlas, dense_layout
 from .lanes import lanes_layout
 from .layout import Layout
+from .pairs import PairsBlas, pair_layout
 from .particles import particle_layout
 from .records import Plan, SolverConstants, no_step_data
 from .signatures import DriverTypes, compiled_driver, no_begin
@@ -65,6 +68,7 @@ def layout_for(
         lambda: lanes_layout(problem, members) if anderson == 0 else None,
         lambda: dense_layout(problem, members),
         lambda: particle_layout(problem, members),
+        lambda: pair_layout(problem, members),
     ]
     for build in builders:
         layout = build()
@@ -179,7 +183,7 @@ class CompiledRunner(Runner):
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS (the BLAS
         threads in force: those of the run's thread plan, :mod:`isoflow.threads`)."""
-        if not isinstance(self.layout.record, DenseBlas):
+        if not isinstance(self.layout.record, (DenseBlas, PairsBlas)):
             return True
         from ..threads import blas_threads
 
@@ -276,7 +280,9 @@ class CompiledRunner(Runner):
         from numba's cache, once per process and signature:
         :func:`~isoflow._compiled.signatures.compiled_driver`)."""
         impl = self.impl
-        dt = DriverTypes(self.f, self.fargs, self.layout.record, self.mp, self.W.dtype)
+        dt = DriverTypes(
+            self.f, self.fargs, self.layout.record, self.mp, self.W.dtype, len(self.core)
+        )
         dt.compile_stage(self.begin, impl.iterate, impl.finish)
         par = self.parallel if parallel is None else parallel
         return compiled_driver(dt.driver_signature(args), par)

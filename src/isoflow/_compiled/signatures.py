@@ -34,10 +34,12 @@ class DriverTypes:
         The layout record and the method's parameters.
     dtype :
         The state's dtype (``B`` has the same dtype on every compiled layout).
+    ndim :
+        Axes of one state as the field sees it (``len(algebra.shape)``).
     """
 
     def __init__(self, f: Any, fargs: tuple[Any, ...], lay: Any, mp: tuple[Any, ...],
-                 dtype: Any) -> None:  # fmt: skip
+                 dtype: Any, ndim: int = 2) -> None:  # fmt: skip
         dt = numba.from_dtype(np.dtype(dtype))
         A1 = types.Array(dt, 1, "C")
         A2 = types.Array(dt, 2, "C")
@@ -45,7 +47,7 @@ class DriverTypes:
         B1 = types.Array(types.boolean, 1, "C")
         SD = types.Array(types.float64, 2, "C")
         f8 = types.float64
-        self.f = field_type(f, fargs, dtype, dtype)
+        self.f = field_type(f, fargs, dtype, dtype, ndim)
         self.fargs = numba.typeof(fargs)
         head = (self.f, self.fargs, numba.typeof(lay), numba.typeof(mp), SD)
         self.begin = types.FunctionType(types.none(*head, A1, f8))

@@ -7,6 +7,11 @@ Every space implements :class:`Algebra`. Constructors::
 and the compact vector forms of ``so(3)^N`` and ``sl(2,R)^N`` on ``(N, 3)`` arrays::
 
     so3_vectors(N), sl2_vectors(N)
+
+and the semidirect products ``g x| g*`` (pairs of fields, :mod:`isoflow.algebras.semidirect`)::
+
+    semidirect(so(n)), semidirect(u(n)), semidirect(su(n))   # (Theta, W), shape (2, n, n)
+    se3_vectors()                                            # the heavy top, (Gamma, M), (2, 3)
 """
 
 from ._base import Algebra as Algebra
@@ -17,6 +22,10 @@ from .hermitian import Hermitian as Hermitian
 from .hermitian import herm as herm
 from .orthogonal import SpecialOrthogonal as SpecialOrthogonal
 from .orthogonal import so as so
+from .semidirect import SE3Vectors as SE3Vectors
+from .semidirect import SemidirectProduct as SemidirectProduct
+from .semidirect import se3_vectors as se3_vectors
+from .semidirect import semidirect as semidirect
 from .sl2_vectors import SL2Vectors as SL2Vectors
 from .sl2_vectors import sl2_vectors as sl2_vectors
 from .spin import SpinVectors as SpinVectors
@@ -37,7 +46,9 @@ __all__ = [
     "GeneralLinear",
     "Hermitian",
     "MatrixAlgebra",
+    "SE3Vectors",
     "SL2Vectors",
+    "SemidirectProduct",
     "SpecialOrthogonal",
     "SpecialUnitary",
     "SpinVectors",
@@ -47,6 +58,8 @@ __all__ = [
     "Unitary",
     "gl",
     "herm",
+    "se3_vectors",
+    "semidirect",
     "sl2",
     "sl2_vectors",
     "so",

@@ -30,6 +30,7 @@ from .._figures import save
 from ._base import Experiment, ExperimentResult, fit_order
 from .brockett import brockett as brockett
 from .euler_sphere import euler_sphere as euler_sphere
+from .mhd_sphere import mhd_sphere as mhd_sphere
 from .rigid_body import rigid_body as rigid_body
 from .spin_chain_cost import spin_chain_cost as spin_chain_cost
 from .spin_chain_energy import spin_chain_energy as spin_chain_energy
@@ -46,6 +47,7 @@ __all__ = [
     "euler_sphere",
     "figure",
     "fit_order",
+    "mhd_sphere",
     "rigid_body",
     "run_experiment",
     "spin_chain_cost",

@@ -2,12 +2,13 @@
 
 The order is: take the file's write lock (a live writer gets a clear error); open and validate
 the file; check sizes before building anything; build the problem and method from the stored
-configuration (:func:`isoflow.registry.build`) or take them as arguments; check them against
-the file (model, time grid, shape, method); validate the restart as :func:`isoflow.solve`
-validates a start (:func:`isoflow._solve.check_restart`: checked, not projected, so that the
-run continues from exactly the state it held); verify every row's checksum; compare the model
-with the fingerprint the file recorded when the run started (:mod:`isoflow._fingerprint`: a
-changed model is refused with :class:`~isoflow.ModelChangedError` unless ``force``); and only then
+configuration (:func:`~isoflow.io.rebuild.rebuild_run`, for a model of your own the one you
+name again) or take them as arguments; check them against the file (model, time grid, shape,
+method); validate the restart as :func:`isoflow.solve` validates a start
+(:func:`isoflow._solve.check_restart`: checked, not projected, so that the run continues from
+exactly the state it held); verify every row's checksum; compare the model with the
+fingerprint the file recorded when the run started (:mod:`isoflow._fingerprint`: a changed
+model is refused with :class:`~isoflow.ModelChangedError` unless ``force``); and only then
 touch the file (rewrite a killed or version 1 file, truncate it to the checkpoint) and continue
 through the time loop's own entry (:func:`isoflow._solve.continue_run`). A refusal at any step
 leaves the file unchanged.
@@ -20,20 +21,23 @@ for bit.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._errors import ModelChangedError, ResultFileError
+from .._errors import ModelChangedError, ParameterError, ResultFileError
 from .._fingerprint import fingerprint_changes, model_fingerprint
 from .._solve import RunState, Solution, check_restart, continue_run
 from ..diagnostics import DiagnosticsAccumulator
 from ..methods import Method
 from ..problems import IsospectralProblem
+from ..registry import ModelSpec, load_model
 from ..threads import ThreadRequest, plan_threads
 from .lock import WriteLock
-from .reader import Checkpoint, iter_rows, open_result, read_checkpoint
+from .reader import iter_rows, open_result, read_checkpoint
+from .rebuild import rebuild_run
 from .recovery import recover
 from .writer import HDF5Writer
 
@@ -44,24 +48,21 @@ def _rebuild(
     p: Path,
     config: dict[str, Any],
     meta: dict[str, Any],
-    cp: Checkpoint,
     problem: IsospectralProblem | None,
     method: Method | None,
+    model: ModelSpec | None,
+    params: Mapping[str, Any] | None,
 ) -> tuple[IsospectralProblem, Method]:
     """The problem and method of the run, checked against what the file recorded."""
-    from .. import registry
-
     if problem is None or method is None:
         if not config.get("model"):
             raise ResultFileError(
                 f"{p}: the file's configuration names no registered model; pass problem= and "
                 "method= to resume it"
             )
-        # validated first: a configuration asking for a huge state is refused here, before
-        # anything is allocated (registry errors, ConfigError, say what is wrong themselves)
-        cfg = registry.normalize_config(config)
-        prob_b, y0_b, meth_b, _kw = registry.build(cfg)
-        registry.check_recorded_state(meta, prob_b, y0_b)
+        # validated first: a configuration asking for a huge state is refused there, before
+        # anything is allocated (its errors, ConfigError, say what is wrong themselves)
+        prob_b, meth_b = rebuild_run(config, meta, model=model, params=params)
         problem = problem if problem is not None else prob_b
         method = method if method is not None else meth_b
     if not isinstance(method, Method):
@@ -100,6 +101,8 @@ def resume(
     *,
     problem: IsospectralProblem | None = None,
     method: Method | None = None,
+    model: ModelSpec | str | None = None,
+    params: Mapping[str, Any] | None = None,
     progress: bool | None = None,
     throw: bool = True,
     chunk_rows: int = 256,
@@ -114,8 +117,17 @@ def resume(
     path : str or Path
         A result file written by :class:`~isoflow.io.HDF5Writer` (complete, stopped or killed).
     problem, method : optional
-        The run's problem and method; by default rebuilt from the file's configuration with
-        :func:`isoflow.registry.build` (needed for runs of your own problems).
+        The run's problem and method; by default rebuilt from the file's configuration
+        (:func:`~isoflow.io.rebuild.rebuild_run`). Needed for runs of problems you built
+        yourself.
+    model : ModelSpec or str, optional
+        For a run of a model that is not built in (``"package.module:function"``, or a model
+        registered by an installed package): the model, named again (a name is loaded with
+        :func:`~isoflow.registry.load_model`, importing its module), checked to be the one the
+        file recorded and rebuilt from the file's parameters.
+    params : mapping, optional
+        Model parameters given again (``isoflow run --resume FILE --param k=v``): each must
+        equal the recorded value.
     progress, throw :
         As in :func:`isoflow.solve`.
     chunk_rows, flush_seconds :
@@ -143,14 +155,22 @@ def resume(
         Another process writes the file; the file is damaged or crafted; or the problem or
         method do not match the run it records (the file is left unchanged).
     ConfigError
-        The stored configuration does not rebuild the recorded run (another model, a size out
-        of range, a model that is not built in); the file is left unchanged.
+        The stored configuration does not rebuild the recorded run (another model than
+        ``model``, a parameter that differs from ``params``, a size out of range, a model that
+        is not built in and not named); the file is left unchanged.
     NotInSpaceError
         The checkpoint state is not in the problem's space (as :func:`isoflow.solve`).
     ParameterError
-        A malformed ``threads`` (checked before the file is touched).
+        A malformed ``threads``, or ``problem`` together with ``model`` or ``params`` (which
+        rebuild the problem); checked before the file is touched.
     """
     plan_threads(threads)  # a malformed request is refused before anything else
+    if problem is not None and (model is not None or params):
+        raise ParameterError(
+            "model= and params= rebuild the run's problem: give them or problem=, not both"
+        )
+    if isinstance(model, str):
+        model = load_model(model)  # the caller named it: this may import their module
     p = Path(path)
     if p.is_symlink():
         p = Path(os.path.realpath(p))
@@ -165,7 +185,7 @@ def resume(
                 raise o.fail("no checkpoint to resume from (start the run again)")
             config, meta = o.config, o.meta
             needs_rewrite = o.version < 2 or o.flagged
-            problem, method = _rebuild(p, config, meta, cp, problem, method)
+            problem, method = _rebuild(p, config, meta, problem, method, model, params)
             t0, dt = float(meta["t0"]), float(meta["dt"])
             n_steps, save_every = int(meta["n_steps"]), int(meta["save_every"])
             if tuple(np.shape(cp.y)) != tuple(meta["state_shape"]):

@@ -1,32 +1,42 @@
 """The physical systems, each a function returning ``(problem, initial_state)``.
 
-The model modules are imported on first use (``iso.models.rigid_body`` imports only
-``rigid_body.py``), so that a model whose kernel is compiled code loads numba only when used.
+Every public name of the models is an attribute of this package (``iso.models.rigid_body``,
+``from isoflow.models import BROCKETT_DEFAULT_SCALE``). Each model lives in a private module
+named after it (``_rigid_body.py``), imported on first use: ``iso.models.rigid_body`` imports
+only ``_rigid_body.py``, so that a model whose kernel is compiled code loads numba only when
+used. The modules' names differ from the functions', so importing a module never rebinds a
+function's name.
 """
 
 from __future__ import annotations
 
 import importlib
-import sys
-import types
 from typing import Any
 
 from .._errors import ParameterError as ParameterError
 
 #: public name -> module that defines it
 _WHERE = {
-    "brockett": "brockett",
-    "coriolis_matrix": "euler_sphere",
-    "euler_sphere": "euler_sphere",
-    "heisenberg_chain": "heisenberg_chain",
-    "hyperbolic_vortices": "hyperbolic_vortices",
-    "jacobi_coefficients": "toda",
-    "jacobi_matrix": "toda",
-    "off_band": "toda",
-    "rigid_body": "rigid_body",
-    "sphere_vortices": "sphere_vortices",
-    "spin_lattice": "spin_lattice",
-    "toda": "toda",
+    "BROCKETT_DEFAULT_SCALE": "_brockett",
+    "PAPER_CONFIGS": "_hyperbolic_vortices",
+    "brockett": "_brockett",
+    "coriolis_matrix": "_euler_sphere",
+    "euler_sphere": "_euler_sphere",
+    "heavy_top": "_heavy_top",
+    "heisenberg_chain": "_heisenberg_chain",
+    "hyperbolic_vortices": "_hyperbolic_vortices",
+    "jacobi_coefficients": "_toda",
+    "jacobi_matrix": "_toda",
+    "mhd_sphere": "_mhd_sphere",
+    "off_band": "_toda",
+    "paper_inertia_d": "_rigid_body",
+    "paper_spin_curve": "_heisenberg_chain",
+    "paper_vortex_config": "_hyperbolic_vortices",
+    "rigid_body": "_rigid_body",
+    "sphere_vortices": "_sphere_vortices",
+    "spin_lattice": "_spin_lattice",
+    "spin_lattice_field": "_spin_lattice",
+    "toda": "_toda",
 }
 
 __all__ = ["ParameterError", *sorted(_WHERE)]
@@ -42,22 +52,3 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(__all__)
-
-
-class _Models(types.ModuleType):
-    """This package, keeping each model function bound under its name.
-
-    Importing a submodule (``from isoflow.models.brockett import BROCKETT_DEFAULT_SCALE``, or
-    ``sphere_vortices.py`` importing helpers of ``hyperbolic_vortices.py``) makes the import
-    system set the package attribute of the submodule's name to the module, which would shadow
-    the function of the same name (``iso.models.brockett(...)``: "'module' object is not
-    callable"). The function is bound instead.
-    """
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if isinstance(value, types.ModuleType) and _WHERE.get(name) == name:
-            value = getattr(value, name)
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Models

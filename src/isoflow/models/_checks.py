@@ -8,9 +8,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._errors import DtypeError, NonFiniteError, ParameterError
+from .._errors import DtypeError, NonFiniteError, NotInSpaceError, ParameterError, ShapeError
 
-__all__ = ["available_memory", "check_n", "real_parameter", "require_memory"]
+__all__ = [
+    "available_memory",
+    "check_n",
+    "check_separated",
+    "check_vortex_input",
+    "real_parameter",
+    "require_memory",
+]
 
 Array = NDArray[Any]
 
@@ -85,4 +92,47 @@ def require_memory(state_bytes: float, peak_states: float, what: str) -> None:
             f"{what} needs about {_size(need)} of memory to build ({peak_states:g} times the "
             f"{_size(state_bytes)} state), more than the {_size(have)} available here; "
             "choose a smaller size"
+        )
+
+
+def check_vortex_input(
+    positions: ArrayLike, circulations: ArrayLike, model: str
+) -> tuple[Array, Array]:
+    """Point vortices' ``(positions, circulations)`` as float arrays: shapes, dtypes,
+    finiteness, circulations nonzero. Positions ``(*batch, N, 3)``."""
+    pos = real_parameter(positions, f"{model}: positions")
+    if pos.ndim < 2 or pos.shape[-1] != 3:
+        raise ShapeError(
+            f"{model}: positions must have shape (N, 3) (rows are vortices), got {pos.shape}"
+        )
+    N = pos.shape[-2]
+    if N < 1:
+        raise ShapeError(f"{model}: at least one vortex is needed, got positions {pos.shape}")
+    circ = real_parameter(circulations, f"{model}: circulations")
+    if circ.shape != (N,):
+        raise ShapeError(
+            f"{model}: circulations must have shape ({N},) for {N} vortices, got {circ.shape}"
+        )
+    if np.any(circ == 0):
+        raise ParameterError(
+            f"{model}: circulations must be nonzero (a vortex of zero strength is a passive "
+            f"tracer, outside this Lie–Poisson model), got {circ}"
+        )
+    return pos, circ
+
+
+def check_separated(products: Array, limit: float, model: str, what: str) -> None:
+    """Raise if two distinct vortices coincide (``|products_ij - limit|`` tiny)."""
+    N = products.shape[-1]
+    if N < 2:
+        return
+    off = ~np.eye(N, dtype=bool)
+    gap = np.abs(products - limit)[..., off]
+    worst = float(np.min(gap))
+    if worst <= 1e-12:
+        raise NotInSpaceError(
+            f"{model}: two vortices coincide ({what} = {limit:g} up to {worst:.1e}); the phase "
+            "space excludes collisions",
+            distance=worst,
+            tolerance=1e-12,
         )

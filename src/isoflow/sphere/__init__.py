@@ -74,8 +74,11 @@ Initial data: :func:`random_coefficients`, :func:`random_vorticity`,
 :func:`vorticity_from_function`.
 Diagnostics: :func:`casimirs`, :func:`vorticity_levels`, :func:`energy`, :func:`enstrophy`,
 :func:`energy_spectrum`, :func:`enstrophy_spectrum`, :func:`angular_momentum`.
+Two fields (magnetohydrodynamics, :func:`isoflow.models.mhd_sphere`): :func:`current`,
+:func:`magnetic_energy`, :func:`magnetic_energy_spectrum`, :func:`cross_casimirs`.
 Figures (matplotlib): :func:`plot_map`, :func:`plot_orthographic`,
-:func:`plot_energy_spectrum`, :func:`plot_invariants`, :func:`animate`.
+:func:`plot_energy_spectrum`, :func:`plot_invariants`, :func:`animate`; for two fields
+:func:`plot_mhd` and :func:`draw_field_lines`.
 """
 
 from __future__ import annotations
@@ -107,6 +110,10 @@ from ._grid import synthesize as synthesize
 from ._initial import random_coefficients as random_coefficients
 from ._initial import random_vorticity as random_vorticity
 from ._initial import vorticity_from_function as vorticity_from_function
+from ._mhd import cross_casimirs as cross_casimirs
+from ._mhd import current as current
+from ._mhd import magnetic_energy as magnetic_energy
+from ._mhd import magnetic_energy_spectrum as magnetic_energy_spectrum
 from ._operators import LaplacianCoefficients as LaplacianCoefficients
 from ._operators import hbar as hbar
 from ._operators import laplacian as laplacian
@@ -115,9 +122,11 @@ from ._operators import laplacian_coefficients as laplacian_coefficients
 from ._operators import solve_poisson as solve_poisson
 from ._operators import spin_matrices as spin_matrices
 from .figures import animate as animate
+from .figures import draw_field_lines as draw_field_lines
 from .figures import plot_energy_spectrum as plot_energy_spectrum
 from .figures import plot_invariants as plot_invariants
 from .figures import plot_map as plot_map
+from .figures import plot_mhd as plot_mhd
 from .figures import plot_orthographic as plot_orthographic
 
 __all__ = [
@@ -129,8 +138,11 @@ __all__ = [
     "basis_matrix",
     "casimirs",
     "coefficient_count",
+    "cross_casimirs",
+    "current",
     "degree_order",
     "diagonal_bases",
+    "draw_field_lines",
     "energy",
     "energy_spectrum",
     "enstrophy",
@@ -144,9 +156,12 @@ __all__ = [
     "laplacian_block",
     "laplacian_coefficients",
     "lm_index",
+    "magnetic_energy",
+    "magnetic_energy_spectrum",
     "plot_energy_spectrum",
     "plot_invariants",
     "plot_map",
+    "plot_mhd",
     "plot_orthographic",
     "random_coefficients",
     "random_vorticity",

@@ -14,11 +14,13 @@ from ._operators import check_N, laplacian_block
 
 __all__ = [
     "basis_matrix",
+    "coefficient_array",
     "coefficient_count",
     "degree_order",
     "diagonal_bases",
     "from_coefficients",
     "lm_index",
+    "lmax_of",
     "to_coefficients",
 ]
 
@@ -56,7 +58,14 @@ def degree_order(lmax: int) -> tuple[Array, Array]:
     return ls, ms
 
 
-def _lmax_of(ncoef: int, what: str) -> int:
+def lmax_of(ncoef: int, what: str) -> int:
+    """The degree ``lmax`` of ``ncoef = (lmax+1)^2 - 1`` coefficients (``l = 1..lmax``).
+
+    Raises
+    ------
+    ShapeError
+        ``ncoef`` is not such a count (``what`` names the argument).
+    """
     lmax = math.isqrt(max(ncoef + 1, 0)) - 1
     if lmax < 1 or (lmax + 1) ** 2 - 1 != ncoef:
         raise ShapeError(
@@ -171,7 +180,14 @@ def basis_matrix(N: int, l: int, m: int, *, kind: str = "real") -> Array:
     return 1j * (upper - sign * lower) / np.sqrt(2.0)
 
 
-def _coefficient_array(omega: ArrayLike, what: str) -> Array:
+def coefficient_array(omega: ArrayLike, what: str) -> Array:
+    """Coefficients ``omega`` (``(*batch, (lmax+1)^2 - 1)``) as a float64 array.
+
+    Raises
+    ------
+    DtypeError, ShapeError, NonFiniteError
+        Not real numbers, a scalar, or NaN/Inf (``what`` names the argument).
+    """
     arr = np.asarray(omega)
     if arr.dtype.kind not in "biuf":
         raise DtypeError(f"{what}: coefficients must be real numbers, got dtype {arr.dtype}")
@@ -200,8 +216,8 @@ def from_coefficients(omega: ArrayLike, N: int) -> Array:
         In ``su(N)`` (traceless skew-Hermitian).
     """
     N = check_N(N)
-    arr = _coefficient_array(omega, "from_coefficients")
-    lmax = _lmax_of(arr.shape[-1], "from_coefficients")
+    arr = coefficient_array(omega, "from_coefficients")
+    lmax = lmax_of(arr.shape[-1], "from_coefficients")
     if lmax > N - 1:
         raise ShapeError(
             f"from_coefficients: coefficients up to degree {lmax} do not fit su({N}) "

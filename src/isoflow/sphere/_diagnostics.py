@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError, ShapeError
-from ._basis import _coefficient_array, _lmax_of, to_coefficients
-from ._operators import _as_matrices, hbar, solve_poisson
+from ._basis import coefficient_array, lmax_of, to_coefficients
+from ._operators import as_matrices, hbar, solve_poisson
 
 __all__ = [
     "angular_momentum",
@@ -41,7 +41,7 @@ def vorticity_levels(W: ArrayLike) -> Array:
     -------
     ndarray, shape (*batch, N)
     """
-    flat, batch, N = _as_matrices(W, "vorticity_levels")
+    flat, batch, N = as_matrices(W, "vorticity_levels")
     return np.linalg.eigvalsh(-1j * flat).reshape(*batch, N)
 
 
@@ -79,7 +79,7 @@ def energy(W: ArrayLike) -> Array:
     -------
     ndarray, shape batch
     """
-    flat, batch, N = _as_matrices(W, "energy")
+    flat, batch, N = as_matrices(W, "energy")
     P = solve_poisson(flat)
     tr = np.einsum("kab,kab->k", np.conj(P), flat).real
     return (-2.0 * np.pi / N * tr).reshape(batch)
@@ -94,7 +94,7 @@ def enstrophy(W: ArrayLike) -> Array:
     -------
     ndarray, shape batch
     """
-    flat, batch, N = _as_matrices(W, "enstrophy")
+    flat, batch, N = as_matrices(W, "enstrophy")
     tr = np.trace(flat, axis1=-2, axis2=-1)
     sq = np.sum(np.abs(flat) ** 2, axis=(-2, -1)) - np.abs(tr) ** 2 / N
     return (2.0 * np.pi / N * sq).reshape(batch)
@@ -108,8 +108,8 @@ def _coefficients_of(data: ArrayLike, what: str) -> tuple[Array, int]:
             raise ShapeError(f"{what}: complex input must be (*batch, N, N) matrices")
         c = to_coefficients(arr)
         return c, arr.shape[-1] - 1
-    c = _coefficient_array(arr, what)
-    return c, _lmax_of(c.shape[-1], what)
+    c = coefficient_array(arr, what)
+    return c, lmax_of(c.shape[-1], what)
 
 
 def enstrophy_spectrum(data: ArrayLike) -> Array:
@@ -156,7 +156,7 @@ def angular_momentum(W: ArrayLike) -> Array:
     -------
     ndarray, shape (*batch, 3)
     """
-    flat, batch, N = _as_matrices(W, "angular_momentum")
+    flat, batch, N = as_matrices(W, "angular_momentum")
     Om = -1j * flat
     a = np.arange(N - 1)
     c = np.sqrt((a + 1.0) * (N - a - 1.0))  # (J_+)_{a+1, a}

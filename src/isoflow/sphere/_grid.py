@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import DtypeError, NonFiniteError, ParameterError, ShapeError
-from ._basis import _coefficient_array, _lmax_of, coefficient_count, degree_order
+from ._basis import coefficient_array, coefficient_count, degree_order, lmax_of
 from ._operators import check_N
 
 __all__ = [
@@ -140,8 +140,8 @@ def synthesize(
     """
     import ducc0
 
-    arr = _coefficient_array(omega, "synthesize")
-    lmax = _lmax_of(arr.shape[-1], "synthesize")
+    arr = coefficient_array(omega, "synthesize")
+    lmax = lmax_of(arr.shape[-1], "synthesize")
     geometry = _check_geometry(geometry)
     dt, dp = default_grid_shape(lmax, geometry)
     ntheta = dt if ntheta is None else check_N(ntheta, "ntheta", minimum=2)
@@ -224,10 +224,10 @@ def evaluate(
     """
     import ducc0
 
-    arr = _coefficient_array(omega, "evaluate")
+    arr = coefficient_array(omega, "evaluate")
     if arr.ndim != 1:
         raise ShapeError(f"evaluate: give one set of coefficients, got shape {arr.shape}")
-    lmax = _lmax_of(arr.shape[-1], "evaluate")
+    lmax = lmax_of(arr.shape[-1], "evaluate")
     th, ph = np.broadcast_arrays(np.asarray(colatitude, float), np.asarray(longitude, float))
     loc = np.stack([np.clip(th.ravel(), 0.0, np.pi), np.mod(ph.ravel(), 2.0 * np.pi)], axis=1)
     alm = _to_alm(arr[None, :], lmax)

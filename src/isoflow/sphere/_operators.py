@@ -13,6 +13,7 @@ from .._errors import ParameterError, ShapeError
 
 __all__ = [
     "LaplacianCoefficients",
+    "as_matrices",
     "check_N",
     "hbar",
     "laplacian",
@@ -170,7 +171,16 @@ def laplacian_coefficients(N: int) -> LaplacianCoefficients:
     return LaplacianCoefficients(N=N, diag=diag, gamma=gamma, inv_piv=inv_piv, mult=mult)
 
 
-def _as_matrices(W: ArrayLike, what: str) -> tuple[Array, tuple[int, ...], int]:
+def as_matrices(W: ArrayLike, what: str) -> tuple[Array, tuple[int, ...], int]:
+    """``W`` (``(*batch, N, N)``) as a contiguous complex ``(M, N, N)`` stack, the batch shape
+    and ``N``.
+
+    Raises
+    ------
+    ShapeError
+        Not a stack of square numeric matrices, or ``N`` out of range (``what`` names the
+        argument).
+    """
     Wa = np.asarray(W)
     if Wa.ndim < 2 or Wa.shape[-1] != Wa.shape[-2]:
         raise ShapeError(f"{what}: expected matrices of shape (*batch, N, N), got {Wa.shape}")
@@ -197,7 +207,7 @@ def laplacian(W: ArrayLike) -> Array:
     """
     from .compiled import laplacian_apply_batch
 
-    flat, batch, N = _as_matrices(W, "laplacian")
+    flat, batch, N = as_matrices(W, "laplacian")
     c = laplacian_coefficients(N)
     out = np.empty_like(flat)
     laplacian_apply_batch(flat, out, c.diag, c.gamma)
@@ -221,7 +231,7 @@ def solve_poisson(W: ArrayLike) -> Array:
     """
     from .compiled import poisson_solve_batch
 
-    flat, batch, N = _as_matrices(W, "solve_poisson")
+    flat, batch, N = as_matrices(W, "solve_poisson")
     c = laplacian_coefficients(N)
     out = np.empty_like(flat)
     poisson_solve_batch(flat, out, c.inv_piv, c.mult)

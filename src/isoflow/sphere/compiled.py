@@ -36,6 +36,7 @@ __all__ = [
     "euler_field",
     "laplacian_apply",
     "laplacian_apply_batch",
+    "mhd_field",
     "poisson_solve",
     "poisson_solve_batch",
 ]
@@ -142,6 +143,23 @@ def euler_field(W, out, inv_piv, mult, inv_hbar, shift):  # type: ignore[no-unty
         for b in range(N):
             out[a, b] *= inv_hbar
         out[a, a] += shift[a]
+
+
+@numba.njit(cache=True)
+def mhd_field(W, out, inv_piv, mult, diag, gamma, inv_hbar, shift):  # type: ignore[no-untyped-def]
+    r"""Zeitlin's MHD ``B = (P / hbar + diag(shift), J / hbar)`` on the pair ``W = (Theta, Q)``,
+    ``(2, N, N)``: :math:`\Delta_N P = Q` (:func:`euler_field` on the second field, the same
+    function and arithmetic as the Euler model) and the current :math:`J = \Delta_N\Theta`
+    (:func:`laplacian_apply`; the trace of a stage's :math:`\Theta` is in the kernel of
+    :math:`\Delta_N` and drops out). The ``f(W, out, *args)`` of
+    :func:`isoflow.models.mhd_sphere`'s :class:`~isoflow.CompiledB` kernel.
+    """
+    euler_field(W[1], out[0], inv_piv, mult, inv_hbar, shift)
+    laplacian_apply(W[0], out[1], diag, gamma)
+    N = W.shape[1]
+    for a in range(N):
+        for b in range(N):
+            out[1, a, b] *= inv_hbar
 
 
 @numba.njit(cache=True)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import NonFiniteError, ParameterError, ShapeError
-from ._basis import _coefficient_array, _lmax_of, to_coefficients
+from ._basis import coefficient_array, lmax_of, to_coefficients
 from ._grid import default_grid_shape, evaluate, synthesize
 from ._operators import check_N
 
@@ -32,11 +32,13 @@ __all__ = [
     "SPECTRUM_FLOOR",
     "animate",
     "draw_energy_spectrum",
+    "draw_field_lines",
     "draw_map",
     "draw_orthographic",
     "plot_energy_spectrum",
     "plot_invariants",
     "plot_map",
+    "plot_mhd",
     "plot_orthographic",
 ]
 
@@ -51,8 +53,8 @@ def _coefficients(data: ArrayLike) -> Array:
         if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
             raise ShapeError(f"expected (*batch, N, N) vorticity matrices, got {arr.shape}")
         return to_coefficients(arr)
-    c = _coefficient_array(arr, "coefficients")
-    _lmax_of(c.shape[-1], "coefficients")
+    c = coefficient_array(arr, "coefficients")
+    lmax_of(c.shape[-1], "coefficients")
     return c
 
 
@@ -132,7 +134,7 @@ def draw_map(
     if c.ndim != 1:
         raise ShapeError(f"draw_map: give one vorticity field, got shape {c.shape}")
     vmax = _vmax(vmax, "draw_map")
-    lmax = _lmax_of(c.shape[-1], "draw_map")
+    lmax = lmax_of(c.shape[-1], "draw_map")
     dt, dp = default_grid_shape(lmax)
     ntheta = max(dt, 90) if ntheta is None else check_N(ntheta, "draw_map: ntheta", minimum=2)
     nphi = max(dp, 180) if nphi is None else check_N(nphi, "draw_map: nphi", minimum=1)
@@ -148,6 +150,40 @@ def draw_map(
     ax.set_xticks(np.arange(0, 361, 60))
     ax.set_yticks(np.arange(-90, 91, 30))
     return im
+
+
+def draw_field_lines(
+    ax: Axes,
+    theta: ArrayLike,
+    *,
+    levels: int = 14,
+    ntheta: int | None = None,
+    nphi: int | None = None,
+    color: str = "k",
+    linewidth: float = 0.6,
+) -> Any:
+    r"""Draw magnetic field lines into a map drawn by :func:`draw_map`: the level lines of the
+    magnetic potential :math:`\theta` (the field :math:`b = n\times\nabla\theta` is tangent to
+    them, and stronger where they crowd); returns the contour set.
+
+    ``theta``: one magnetic potential, a matrix ``(N, N)`` (complex) or real coefficients.
+    ``levels`` equally spaced values strictly between the extremes of :math:`\theta`.
+    """
+    c = _coefficients(theta)
+    if c.ndim != 1:
+        raise ShapeError(f"draw_field_lines: give one magnetic potential, got shape {c.shape}")
+    lmax = lmax_of(c.shape[-1], "draw_field_lines")
+    dt, dp = default_grid_shape(lmax)
+    ntheta, nphi = ntheta or max(dt, 90), nphi or max(dp, 180)
+    vals = synthesize(c, ntheta, nphi, geometry="CC")
+    vals = np.concatenate([vals, vals[:, :1]], axis=1)  # close the longitude circle
+    lon = np.linspace(0.0, 360.0, nphi + 1)
+    lat = np.linspace(90.0, -90.0, ntheta)  # CC rings: north pole to south pole
+    lo, hi = float(np.min(vals)), float(np.max(vals))
+    if not hi > lo:  # a constant potential: no field, no lines
+        return None
+    steps = np.linspace(lo, hi, int(levels) + 2)[1:-1]
+    return ax.contour(lon, lat, vals, levels=steps, colors=color, linewidths=linewidth)
 
 
 def _ortho_points(center: tuple[float, float], resolution: int) -> tuple[Array, Array, Array]:
@@ -251,6 +287,45 @@ def plot_map(
     return fig
 
 
+def plot_mhd(
+    Theta: ArrayLike,
+    W: ArrayLike,
+    *,
+    title: str | None = None,
+    levels: int = 14,
+) -> Figure:
+    r"""A state of MHD on the sphere: the vorticity :math:`\omega`, and the current density
+    :math:`j = \Delta\theta` with the magnetic field lines (level lines of :math:`\theta`),
+    on two latitude–longitude maps.
+
+    ``Theta``, ``W``: the magnetic potential and the (relative) vorticity as matrices
+    ``(N, N)`` (complex) or real coefficients (the fields of a state of
+    :func:`isoflow.models.mhd_sphere`, e.g. ``problem.algebra.split(y)``; subtract the
+    Coriolis matrix from the second field on a rotating sphere).
+    """
+    from matplotlib.figure import Figure
+
+    from ._basis import degree_order
+
+    ct = _coefficients(Theta)
+    cw = _coefficients(W)
+    if ct.ndim != 1 or cw.ndim != 1:
+        raise ShapeError(f"plot_mhd: give one state, got shapes {ct.shape} and {cw.shape}")
+    ls, _ = degree_order(lmax_of(ct.size, "plot_mhd"))
+    fig = Figure(figsize=(12, 4.2), layout="constrained")
+    axes = fig.subplots(1, 2)
+    im = draw_map(axes[0], cw)
+    fig.colorbar(im, ax=axes[0], label=r"$\omega$", shrink=0.85)
+    axes[0].set_title(r"vorticity $\omega$")
+    im = draw_map(axes[1], -ls * (ls + 1.0) * ct, cmap="PuOr_r")
+    fig.colorbar(im, ax=axes[1], label=r"$j = \Delta\theta$", shrink=0.85)
+    draw_field_lines(axes[1], ct, levels=levels)
+    axes[1].set_title(r"current $j$ and field lines (levels of $\theta$)")
+    N = _N_of(W)
+    fig.suptitle(title or ("MHD on the sphere" + (f", N = {N}" if N else "")))
+    return fig
+
+
 def plot_orthographic(
     data: ArrayLike,
     *,
@@ -276,7 +351,7 @@ def plot_orthographic(
     check_N(resolution, "plot_orthographic: resolution", minimum=3)
     lim = _vmax(vmax, "plot_orthographic")
     if lim is None:
-        lim = float(np.max(np.abs(synthesize(c, *default_grid_shape(_lmax_of(c.size, "c"))))))
+        lim = float(np.max(np.abs(synthesize(c, *default_grid_shape(lmax_of(c.size, "c"))))))
     fig = Figure(figsize=(3.6 * len(centers) + 0.8, 3.9), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(centers)))
     im: Any = None
@@ -298,6 +373,7 @@ def draw_energy_spectrum(
     spectra: Mapping[str, ArrayLike],
     *,
     reference_slopes: Sequence[float] = (),
+    ylabel: str | None = None,
 ) -> None:
     r"""Draw log–log energy spectra :math:`E_l` against degree ``l`` into ``ax``.
 
@@ -305,7 +381,8 @@ def draw_energy_spectrum(
     matrix ``(N, N)`` (complex; its spectrum is computed). Values below
     :data:`SPECTRUM_FLOOR` times the largest are left out, and the vertical axis spans the
     values drawn (with a margin), not the rounding level below them.
-    ``reference_slopes`` adds dashed power laws :math:`l^{s}` through the largest value.
+    ``reference_slopes`` adds dashed power laws :math:`l^{s}` through the largest value;
+    ``ylabel`` replaces the kinetic spectrum's axis label.
 
     Raises
     ------
@@ -329,7 +406,7 @@ def draw_energy_spectrum(
             ax.loglog(ls, top * ls**s, "k--", lw=0.7, label=f"$l^{{{s:g}}}$")
         ax.set_ylim(float(np.min(values)) / 3, top * 3)
     ax.set_xlabel("degree $l$")
-    ax.set_ylabel(r"$E_l = \sum_m \omega_{lm}^2 / (l(l+1))$")
+    ax.set_ylabel(ylabel or r"$E_l = \sum_m \omega_{lm}^2 / (l(l+1))$")
     ax.legend(fontsize=8)
 
 
@@ -357,18 +434,21 @@ def plot_energy_spectrum(
     *,
     title: str | None = None,
     reference_slopes: Sequence[float] = (-3.0,),
+    ylabel: str | None = None,
 ) -> Figure:
     r"""Log–log energy spectra :math:`E_l` against degree ``l`` (:func:`draw_energy_spectrum`).
 
     ``spectra`` maps a label (e.g. ``"t = 0"``) to either a spectrum ``(lmax,)`` (degrees
     ``1..lmax``) or a vorticity matrix ``(N, N)`` (complex; its spectrum is computed).
-    ``reference_slopes`` draws dashed power laws :math:`l^{s}` for orientation.
+    ``reference_slopes`` draws dashed power laws :math:`l^{s}` for orientation. ``ylabel``
+    replaces the kinetic spectrum's label (e.g. for magnetic spectra,
+    :func:`~isoflow.sphere.magnetic_energy_spectrum`, drawn next to kinetic ones).
     """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(6, 4.5), layout="constrained")
     ax = fig.subplots()
-    draw_energy_spectrum(ax, spectra, reference_slopes=reference_slopes)
+    draw_energy_spectrum(ax, spectra, reference_slopes=reference_slopes, ylabel=ylabel)
     ax.set_title(title or "energy spectrum")
     return fig
 
@@ -500,7 +580,7 @@ def animate(
         raise ShapeError(f"animate: expected a sequence of states, got coefficients {c.shape}")
     n = c.shape[0]
     times = None if ts is None else _series(ts, n, "animate: ts")
-    lmax = _lmax_of(c.shape[-1], "animate")
+    lmax = lmax_of(c.shape[-1], "animate")
     if vmax is None:
         vmax = float(np.max(np.abs(synthesize(c, *default_grid_shape(lmax)))))
     fig = Figure(figsize=(7.5, 4.0) if kind == "map" else (5.0, 5.0), layout="constrained")

@@ -1,12 +1,6 @@
 r"""The periodic Heisenberg spin chain on :math:`(\mathbb{R}^3, \times)^N` (paper, Section 3.3).
 
-.. math::
-
-    \dot w_i = w_i \times (w_{i-1} + w_{i+1}), \qquad w_0 = w_N,\ w_{N+1} = w_1,
-    \qquad H(w) = \sum_{i=1}^N w_i \cdot w_{i+1},
-
-a spatial discretization (up to scaling) of the Landau–Lifshitz equation
-:math:`\dot w = w \times \partial_{xx} w` for a closed curve :math:`w: S^1 \to S^2`.
+The equations and what they conserve: the docstring of :func:`isoflow.models.heisenberg_chain`.
 """
 
 from __future__ import annotations
@@ -68,8 +62,10 @@ def heisenberg_chain(
     .. math::
 
         \dot w_i = w_i \times (w_{i-1} + w_{i+1}), \qquad
-        H(w) = \sum_{i=1}^N w_i \cdot w_{i+1}, \qquad w_{N+1} = w_1.
+        H(w) = \sum_{i=1}^N w_i \cdot w_{i+1}, \qquad w_{N+1} = w_1,
 
+    a spatial discretization (up to scaling) of the Landau–Lifshitz equation
+    :math:`\dot w = w \times \partial_{xx} w` for a closed curve :math:`w: S^1 \to S^2`.
     With the Euclidean gradient :math:`\nabla_i H = w_{i-1} + w_{i+1}` this is
     :math:`\dot w_i = w_i \times \nabla_i H`, the Lie–Poisson flow on
     :math:`\mathfrak{so}(3)^{N*}` in the pairing of :class:`~isoflow.algebras.SpinVectors`.

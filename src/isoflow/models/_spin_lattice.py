@@ -1,32 +1,6 @@
 r"""Classical Heisenberg / XXZ spins with a Zeeman field on a periodic square lattice.
 
-The model is written against the public protocol only (a ``CompiledB`` field, an
-``IsospectralProblem`` on :math:`(\mathbb{R}^3,\times)^N`), as a user would write it: its ``B``
-is given once, as a compiled function, and runs on every path (the NumPy path derives its
-``B`` from it; the compiled loops call it directly).
-
-Equations
----------
-Spins :math:`w_i \in \mathbb{R}^3` sit on the sites ``i = (a, b)`` of an ``L_1 x L_2`` grid
-with periodic boundary conditions; :math:`\langle ij\rangle` runs over nearest-neighbour pairs
-(each once). With :math:`D = \operatorname{diag}(1, 1, 1 + \Delta)` and a field ``h``,
-
-.. math::
-
-    H(w) = J \sum_{\langle ij\rangle} w_i \cdot D w_j \;-\; h \cdot \sum_i w_i ,
-    \qquad
-    \dot w_i = w_i \times \nabla_i H = w_i \times \Big(J \sum_{j \sim i} D w_j - h\Big),
-
-the Lie–Poisson flow on :math:`(\mathfrak{so}(3)^*)^N` in the pairing of
-:class:`~isoflow.algebras.SpinVectors` (:math:`\dot w_i = w_i \times \nabla_i H`). In the form
-:math:`\dot w = [B(w), w] = B(w) \times w` this is :math:`B_i = -\nabla_i H = h - J \sum_{j \sim
-i} D w_j`. ``J > 0`` is antiferromagnetic, ``J < 0`` ferromagnetic; :math:`\Delta = 0` is the
-isotropic Heisenberg model.
-
-Conserved: every :math:`|w_i|` (Casimirs), ``H``, and the total spin :math:`S = \sum_i w_i`
-when :math:`\Delta = 0` and :math:`h = 0` (only :math:`S_z` when the field and the anisotropy
-are along ``z``): :math:`\dot S = \sum_i w_i \times (J \sum_{j\sim i} D w_j - h)`, whose pair
-terms cancel for :math:`D = I` and whose field term is :math:`S \times h`.
+The equations and what they conserve: the Notes of :func:`isoflow.models.spin_lattice`.
 """
 
 from __future__ import annotations
@@ -102,7 +76,7 @@ def spin_lattice(
 ) -> tuple[IsospectralProblem, Array]:
     r"""Classical Heisenberg/XXZ spins with a Zeeman field on a periodic square lattice.
 
-    See the module docstring for the equations:
+    The equations (Notes below):
     :math:`H = J \sum_{\langle ij\rangle} w_i \cdot D w_j - h\cdot\sum_i w_i`,
     :math:`D = \operatorname{diag}(1, 1, 1 + \Delta)`,
     :math:`\dot w_i = w_i \times \nabla_i H`, on :math:`(\mathbb{R}^3,\times)^N`,
@@ -149,6 +123,35 @@ def spin_lattice(
     ParameterError, ShapeError
         A lattice side below 3, non-finite couplings or field, a field of the wrong shape, an
         unknown ``initial``.
+
+    Notes
+    -----
+    The model is written against the public protocol only (a ``CompiledB`` field, an
+    ``IsospectralProblem`` on :math:`(\mathbb{R}^3,\times)^N`), as a user would write it: its ``B``
+    is given once, as a compiled function, and runs on every path (the NumPy path derives its
+    ``B`` from it; the compiled loops call it directly).
+
+    **Equations.** Spins :math:`w_i \in \mathbb{R}^3` sit on the sites ``i = (a, b)`` of an
+    ``L_1 x L_2`` grid with periodic boundary conditions; :math:`\langle ij\rangle` runs over
+    nearest-neighbour pairs (each once). With :math:`D = \operatorname{diag}(1, 1, 1 + \Delta)`
+    and a field ``h``,
+
+    .. math::
+
+        H(w) = J \sum_{\langle ij\rangle} w_i \cdot D w_j \;-\; h \cdot \sum_i w_i ,
+        \qquad
+        \dot w_i = w_i \times \nabla_i H = w_i \times \Big(J \sum_{j \sim i} D w_j - h\Big),
+
+    the Lie–Poisson flow on :math:`(\mathfrak{so}(3)^*)^N` in the pairing of
+    :class:`~isoflow.algebras.SpinVectors` (:math:`\dot w_i = w_i \times \nabla_i H`). In the form
+    :math:`\dot w = [B(w), w] = B(w) \times w` this is :math:`B_i = -\nabla_i H = h - J \sum_{j \sim
+    i} D w_j`. ``J > 0`` is antiferromagnetic, ``J < 0`` ferromagnetic; :math:`\Delta = 0` is the
+    isotropic Heisenberg model.
+
+    Conserved: every :math:`|w_i|` (Casimirs), ``H``, and the total spin :math:`S = \sum_i w_i`
+    when :math:`\Delta = 0` and :math:`h = 0` (only :math:`S_z` when the field and the anisotropy
+    are along ``z``): :math:`\dot S = \sum_i w_i \times (J \sum_{j\sim i} D w_j - h)`, whose pair
+    terms cancel for :math:`D = I` and whose field term is :math:`S \times h`.
 
     Examples
     --------

@@ -1,11 +1,5 @@
 r"""Point vortices on the hyperbolic plane (paper, Section 3.4), a Lie–Poisson system on
 :math:`(\mathfrak{sl}(2,\mathbb{R})^*)^N \cong (\mathbb{R}^3, \times_L)^N`.
-
-The vortices live on the upper sheet of the hyperboloid :math:`x^2 + y^2 - z^2 = -1`,
-:math:`z > 0` (a model of the hyperbolic plane), with the Lorentzian products
-:math:`a \cdot_L b = a_1 b_1 + a_2 b_2 - a_3 b_3` and :math:`a \times_L b = 2 L (a \times b)`
-of :mod:`isoflow.algebras.sl2_vectors`. For two points on the sheet
-:math:`w_i \cdot_L w_j = -\cosh d_{ij} \le -1`, with :math:`d_{ij}` the hyperbolic distance.
 """
 
 from __future__ import annotations
@@ -15,11 +9,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._errors import NotInSpaceError, ParameterError, ShapeError
+from .._errors import NotInSpaceError, ParameterError
 from ..algebras.sl2_vectors import L_DIAG, SL2Vectors
 from ..kernels import PairwiseVortex
 from ..problems import IsospectralProblem
-from ._checks import real_parameter
+from ._checks import check_separated, check_vortex_input
 
 __all__ = ["PAPER_CONFIGS", "hyperbolic_vortices", "paper_vortex_config"]
 
@@ -58,49 +52,6 @@ def paper_vortex_config(config: int) -> tuple[Array, Array]:
         raise ParameterError(f"hyperbolic_vortices: config must be 1 or 2, got {config!r}")
     pos, circ = PAPER_CONFIGS[config]
     return np.array(pos, dtype=np.float64), np.array(circ, dtype=np.float64)
-
-
-# ---- validation shared with the sphere model ----------------------------------------------------
-def _check_vortex_input(
-    positions: ArrayLike, circulations: ArrayLike, model: str
-) -> tuple[Array, Array]:
-    """Shapes, dtypes, finiteness; circulations nonzero. Positions ``(*batch, N, 3)``."""
-    pos = real_parameter(positions, f"{model}: positions")
-    if pos.ndim < 2 or pos.shape[-1] != 3:
-        raise ShapeError(
-            f"{model}: positions must have shape (N, 3) (rows are vortices), got {pos.shape}"
-        )
-    N = pos.shape[-2]
-    if N < 1:
-        raise ShapeError(f"{model}: at least one vortex is needed, got positions {pos.shape}")
-    circ = real_parameter(circulations, f"{model}: circulations")
-    if circ.shape != (N,):
-        raise ShapeError(
-            f"{model}: circulations must have shape ({N},) for {N} vortices, got {circ.shape}"
-        )
-    if np.any(circ == 0):
-        raise ParameterError(
-            f"{model}: circulations must be nonzero (a vortex of zero strength is a passive "
-            f"tracer, outside this Lie–Poisson model), got {circ}"
-        )
-    return pos, circ
-
-
-def _check_separated(products: Array, limit: float, model: str, what: str) -> None:
-    """Raise if two distinct vortices coincide (``|products_ij - limit|`` tiny)."""
-    N = products.shape[-1]
-    if N < 2:
-        return
-    off = ~np.eye(N, dtype=bool)
-    gap = np.abs(products - limit)[..., off]
-    worst = float(np.min(gap))
-    if worst <= 1e-12:
-        raise NotInSpaceError(
-            f"{model}: two vortices coincide ({what} = {limit:g} up to {worst:.1e}); the phase "
-            "space excludes collisions",
-            distance=worst,
-            tolerance=1e-12,
-        )
 
 
 # ---- the model ----------------------------------------------------------------------------------
@@ -193,6 +144,14 @@ def hyperbolic_vortices(
     S. Hwang, S.-C. Kim, *Point vortices on hyperbolic sphere*, J. Geom. Phys. 59 (2009);
     *Relative equilibria of point vortices on the hyperbolic sphere*, J. Math. Phys. 54 (2013).
 
+    Notes
+    -----
+    The vortices live on the upper sheet of the hyperboloid :math:`x^2 + y^2 - z^2 = -1`,
+    :math:`z > 0` (a model of the hyperbolic plane), with the Lorentzian products
+    :math:`a \cdot_L b = a_1 b_1 + a_2 b_2 - a_3 b_3` and :math:`a \times_L b = 2 L (a \times b)`
+    of :mod:`isoflow.algebras.sl2_vectors`. For two points on the sheet
+    :math:`w_i \cdot_L w_j = -\cosh d_{ij} \le -1`, with :math:`d_{ij}` the hyperbolic distance.
+
     Examples
     --------
     >>> import isoflow as iso
@@ -211,7 +170,7 @@ def hyperbolic_vortices(
         if circulations is None:
             raise ParameterError(f"{model}: positions need circulations")
         cfg = None
-        pos, circ = _check_vortex_input(positions, circulations, model)
+        pos, circ = check_vortex_input(positions, circulations, model)
     q = np.einsum("...i,...i->...", pos * L_DIAG, pos)
     off = float(np.max(np.abs(q + 1.0)))
     if off > tol:
@@ -228,7 +187,7 @@ def hyperbolic_vortices(
             tolerance=0.0,
         )
     w_init = pos / np.sqrt(-q)[..., None]
-    _check_separated(_lorentz_gram(w_init), -1.0, model, "w_i ._L w_j")
+    check_separated(_lorentz_gram(w_init), -1.0, model, "w_i ._L w_j")
     N = w_init.shape[-2]
     G = circ.copy()
     G.setflags(write=False)

@@ -12,8 +12,8 @@ from .._errors import NotInSpaceError, ParameterError
 from ..algebras.spin import SpinVectors
 from ..kernels import PairwiseVortex
 from ..problems import IsospectralProblem
+from ._checks import check_separated, check_vortex_input
 from ._noise import transport_noise
-from .hyperbolic_vortices import _check_separated, _check_vortex_input
 
 __all__ = ["sphere_vortices"]
 
@@ -119,7 +119,7 @@ def sphere_vortices(
     model = "sphere_vortices"
     if positions is None or circulations is None:
         raise ParameterError(f"{model}: positions and circulations are both required")
-    pos, circ = _check_vortex_input(positions, circulations, model)
+    pos, circ = check_vortex_input(positions, circulations, model)
     sq = np.einsum("...i,...i->...", pos, pos)
     off = float(np.max(np.abs(sq - 1.0)))
     if off > tol:
@@ -130,7 +130,7 @@ def sphere_vortices(
             tolerance=tol,
         )
     x_init = pos / np.sqrt(sq)[..., None]
-    _check_separated(_gram(x_init), 1.0, model, "x_i . x_j")
+    check_separated(_gram(x_init), 1.0, model, "x_i . x_j")
     N = x_init.shape[-2]
     G = circ.copy()
     G.setflags(write=False)

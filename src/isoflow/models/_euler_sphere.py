@@ -1,44 +1,6 @@
 r"""Zeitlin's quantized Euler equations on the (rotating) sphere, on :math:`\mathfrak{su}(N)`.
 
-Continuum model: the incompressible Euler equations on the unit sphere in vorticity form,
-
-.. math::
-
-    \dot\omega = \{\omega + f, \psi\}, \qquad \Delta\psi = \omega, \qquad
-    u = n \times \nabla\psi, \qquad f = 2\Omega\cos\theta,
-
-with the Poisson bracket :math:`\{g, h\} = \frac{1}{\sin\theta}(\partial_\theta g\,
-\partial_\varphi h - \partial_\varphi g\,\partial_\theta h)` (so that :math:`\{x, y\} = z`;
-:math:`\{\omega, \psi\} = -u\cdot\nabla\omega`), colatitude :math:`\theta`, longitude
-:math:`\varphi`, and the sphere rotating with angular velocity :math:`\Omega` about the
-``z`` axis (:math:`f` is the Coriolis parameter; :math:`\Omega > 0` is eastward, in the
-direction of increasing :math:`\varphi`).
-
-Zeitlin's quantization (see :mod:`isoflow.sphere` for the conventions) replaces the vorticity
-by :math:`W = i\,T(\omega) \in \mathfrak{su}(N)`, the bracket by
-:math:`\frac{1}{\hbar}[\cdot,\cdot]` with :math:`\hbar = 2/\sqrt{N^2-1}`, and the Laplacian by
-the Hoppe–Yau :math:`\Delta_N`:
-
-.. math::
-
-    \dot W = \frac{1}{\hbar}[P, W + F], \qquad \Delta_N P = W, \qquad
-    F = i\,T(2\Omega z) = 2i\Omega\hbar J_3 .
-
-The state of the problem is the **absolute vorticity** :math:`Q = W + F` (for
-:math:`\Omega = 0`, :math:`Q = W`). Since :math:`F` is a degree-one harmonic,
-:math:`\Delta_N^{-1}F = -F/2`, and the flow is isospectral in :math:`Q` with an affine ``B``:
-
-.. math::
-
-    \dot Q = [B(Q), Q], \qquad
-    B(Q) = \frac{1}{\hbar}\Delta_N^{-1} Q + \frac{F}{2\hbar}
-         = \frac{1}{\hbar}\Delta_N^{-1} Q + i\Omega J_3,
-
-(:math:`\Delta_N^{-1}` on the traceless part). The Casimirs :math:`\operatorname{Tr}(Q^k)`,
-i.e. the integrals of powers of the absolute vorticity :math:`\omega + f`, are conserved (by
-IsoMP to rounding), and so is the kinetic energy of the relative vorticity :math:`W = Q - F`.
-The constant term :math:`i\Omega J_3` is the generator of the frame rotation: the solution is
-the non-rotating one seen from a frame turning with angular velocity :math:`\Omega`.
+The equations and what they conserve: the Notes of :func:`isoflow.models.euler_sphere`.
 """
 
 from __future__ import annotations
@@ -125,7 +87,7 @@ def euler_sphere(
 ) -> tuple[IsospectralProblem, Array]:
     r"""Zeitlin's model of the Euler equations on the sphere, and its initial state.
 
-    Equations (module docstring): :math:`\dot Q = [B(Q), Q]` on :math:`\mathfrak{su}(N)` with
+    Equations (Notes below): :math:`\dot Q = [B(Q), Q]` on :math:`\mathfrak{su}(N)` with
     :math:`B(Q) = \hbar^{-1}\Delta_N^{-1}Q + i\Omega J_3`, :math:`\hbar = 2/\sqrt{N^2-1}`,
     where :math:`Q = W + F` is the absolute vorticity, :math:`W = i\sum_{l,m}\omega_{lm}
     T_{lm}` the relative vorticity and :math:`F = 2i\Omega\hbar J_3` the Coriolis term. For
@@ -199,6 +161,48 @@ def euler_sphere(
         Coefficients of a wrong length or of degree above ``N - 1``; ``W0`` of a wrong shape.
     NotInSpaceError
         ``W0`` not in ``su(N)``.
+
+    Notes
+    -----
+    Continuum model: the incompressible Euler equations on the unit sphere in vorticity form,
+
+    .. math::
+
+        \dot\omega = \{\omega + f, \psi\}, \qquad \Delta\psi = \omega, \qquad
+        u = n \times \nabla\psi, \qquad f = 2\Omega\cos\theta,
+
+    with the Poisson bracket :math:`\{g, h\} = \frac{1}{\sin\theta}(\partial_\theta g\,
+    \partial_\varphi h - \partial_\varphi g\,\partial_\theta h)` (so that :math:`\{x, y\} = z`;
+    :math:`\{\omega, \psi\} = -u\cdot\nabla\omega`), colatitude :math:`\theta`, longitude
+    :math:`\varphi`, and the sphere rotating with angular velocity :math:`\Omega` about the
+    ``z`` axis (:math:`f` is the Coriolis parameter; :math:`\Omega > 0` is eastward, in the
+    direction of increasing :math:`\varphi`).
+
+    Zeitlin's quantization (see :mod:`isoflow.sphere` for the conventions) replaces the vorticity
+    by :math:`W = i\,T(\omega) \in \mathfrak{su}(N)`, the bracket by
+    :math:`\frac{1}{\hbar}[\cdot,\cdot]` with :math:`\hbar = 2/\sqrt{N^2-1}`, and the Laplacian by
+    the Hoppe–Yau :math:`\Delta_N`:
+
+    .. math::
+
+        \dot W = \frac{1}{\hbar}[P, W + F], \qquad \Delta_N P = W, \qquad
+        F = i\,T(2\Omega z) = 2i\Omega\hbar J_3 .
+
+    The state of the problem is the **absolute vorticity** :math:`Q = W + F` (for
+    :math:`\Omega = 0`, :math:`Q = W`). Since :math:`F` is a degree-one harmonic,
+    :math:`\Delta_N^{-1}F = -F/2`, and the flow is isospectral in :math:`Q` with an affine ``B``:
+
+    .. math::
+
+        \dot Q = [B(Q), Q], \qquad
+        B(Q) = \frac{1}{\hbar}\Delta_N^{-1} Q + \frac{F}{2\hbar}
+             = \frac{1}{\hbar}\Delta_N^{-1} Q + i\Omega J_3,
+
+    (:math:`\Delta_N^{-1}` on the traceless part). The Casimirs :math:`\operatorname{Tr}(Q^k)`,
+    i.e. the integrals of powers of the absolute vorticity :math:`\omega + f`, are conserved (by
+    IsoMP to rounding), and so is the kinetic energy of the relative vorticity :math:`W = Q - F`.
+    The constant term :math:`i\Omega J_3` is the generator of the frame rotation: the solution is
+    the non-rotating one seen from a frame turning with angular velocity :math:`\Omega`.
 
     References
     ----------

@@ -1,4 +1,4 @@
-"""Running a sweep on a dask.distributed cluster (a local one by default).
+"""Running a sweep on a dask.distributed cluster (a local one by default): :func:`run`.
 
 The client checks each task before it submits it (a task whose summary and result file are
 valid is skipped) and keeps a bounded number of tasks in flight, refilled as they finish, so
@@ -26,7 +26,7 @@ from .files import read_summary, write_manifest
 from .spec import SweepError, SweepSpec, Task, read_spec, require_extra
 from .task import run_task, task_layouts, watch_client
 
-__all__ = ["CONNECT_TIMEOUT", "SweepResult", "sweep"]
+__all__ = ["CONNECT_TIMEOUT", "SweepResult", "run"]
 
 #: Environment of the worker processes of a local cluster: one BLAS/OpenMP thread each.
 WORKER_ENV = {
@@ -50,7 +50,7 @@ PROGRESS_SECONDS = 30.0
 
 @dataclass
 class SweepResult:
-    """What :func:`sweep` did.
+    """What :func:`run` did.
 
     Attributes
     ----------
@@ -364,7 +364,7 @@ def _check_arguments(
         raise SweepError(f"connect_timeout must be a positive number of seconds, got {timeout!r}")
 
 
-def sweep(
+def run(
     spec: SweepSpec | str | os.PathLike[str] | Mapping[str, Any],
     out: str | os.PathLike[str] | None = None,
     *,

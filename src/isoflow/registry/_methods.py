@@ -1,0 +1,153 @@
+"""Methods and nonlinear solvers by name: :data:`METHODS`, :data:`SOLVERS` and their makers.
+
+A method's name is its :attr:`isoflow.Method.name` (``isomp``, ``isosyrk-2``, the compositions
+``<base>-<scheme>``); an implicit method takes one of the :data:`SOLVERS`, which are made
+with a tolerance and, for the fixed point, an Anderson memory of at most
+:data:`~isoflow.nonlinear.ANDERSON_MAX` (the bound :class:`isoflow.FixedPoint` checks; every
+other check reads it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from ..methods import (
+    RK4,
+    ClassicalMidpoint,
+    Composition,
+    IsoMP,
+    IsoSyRK,
+    Method,
+    SphericalMidpoint,
+    StochasticIsoMP,
+)
+from ..methods.composition import SCHEMES
+from ..nonlinear import ANDERSON_MAX, FixedPoint, Newton, NonlinearSolver
+from ._params import ConfigError, choice
+
+__all__ = [
+    "ANDERSON_MAX",
+    "METHODS",
+    "SOLVERS",
+    "MethodSpec",
+    "SolverSpec",
+    "make_method",
+    "make_solver",
+]
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    """A nonlinear solver for implicit methods: ``make(rtol, anderson)``."""
+
+    name: str
+    make: Callable[[float | None, int], NonlinearSolver]
+    description: str
+    anderson: bool = False
+
+
+def _fixed_point(rtol: float | None, anderson: int) -> NonlinearSolver:
+    kw: dict[str, Any] = {} if rtol is None else {"rtol": rtol}
+    return FixedPoint(anderson=anderson, **kw)
+
+
+def _newton(jacobian: str) -> Callable[[float | None, int], NonlinearSolver]:
+    def make(rtol: float | None, anderson: int) -> NonlinearSolver:
+        kw: dict[str, Any] = {} if rtol is None else {"rtol": rtol}
+        return Newton(jacobian=jacobian, **kw)  # type: ignore[arg-type]
+
+    return make
+
+
+#: Nonlinear solvers: name -> :class:`SolverSpec`.
+SOLVERS: dict[str, SolverSpec] = {
+    "fixed-point": SolverSpec(
+        "fixed-point",
+        _fixed_point,
+        "fixed-point iteration (the default; anderson = m mixes the last m iterates)",
+        anderson=True,
+    ),
+    "newton": SolverSpec("newton", _newton("dense"), "Newton, dense Jacobian (small spaces)"),
+    "newton-krylov": SolverSpec(
+        "newton-krylov", _newton("krylov"), "Newton-GMRES, matrix-free (large spaces)"
+    ),
+}
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A time-stepping method: ``make(solver)``; ``implicit`` methods take a solver."""
+
+    name: str
+    make: Callable[[NonlinearSolver | None], Method]
+    description: str
+    implicit: bool = True
+
+
+def _composed(base: Callable[..., Method], scheme: str) -> Callable[[Any], Method]:
+    return lambda solver: Composition(base(solver=solver), scheme)
+
+
+def _plain(cls: Callable[..., Method]) -> Callable[[Any], Method]:
+    return lambda solver: cls(solver=solver)
+
+
+def _isosyrk(stages: int) -> Callable[[Any], Method]:
+    return lambda solver: IsoSyRK(stages, solver=solver)
+
+
+_BASES: dict[str, tuple[Callable[..., Method], str]] = {
+    "isomp": (IsoMP, "isospectral minimal midpoint (the paper's method)"),
+    "spherical-midpoint": (SphericalMidpoint, "spherical midpoint, (R^3, x)^N only"),
+    "classical-midpoint": (ClassicalMidpoint, "classical implicit midpoint (not isospectral)"),
+}
+
+#: Methods: name -> :class:`MethodSpec`.
+METHODS: dict[str, MethodSpec] = {
+    **{name: MethodSpec(name, _plain(cls), text) for name, (cls, text) in _BASES.items()},
+    "rk4": MethodSpec("rk4", lambda solver: RK4(), "classical RK4 (explicit)", implicit=False),
+    "stochastic-isomp": MethodSpec(
+        "stochastic-isomp",
+        _plain(StochasticIsoMP),
+        "stochastic isospectral midpoint (models with noise or a temperature)",
+    ),
+    **{
+        f"isosyrk-{s}": MethodSpec(
+            f"isosyrk-{s}",
+            _isosyrk(s),
+            f"isospectral symplectic Gauss RK, {s} stage{'s' if s > 1 else ''}, order {2 * s}",
+        )
+        for s in (1, 2, 3)
+    },
+    **{
+        f"{base}-{scheme}": MethodSpec(
+            f"{base}-{scheme}",
+            _composed(cls, scheme),
+            f"{base} composed by {scheme} (order {SCHEMES[scheme][1]})",
+        )
+        for base, (cls, _text) in _BASES.items()
+        for scheme in SCHEMES
+    },
+}
+
+
+def make_solver(
+    name: str = "fixed-point", *, rtol: float | None = None, anderson: int = 0
+) -> NonlinearSolver:
+    """The nonlinear solver called ``name`` (:data:`SOLVERS`)."""
+    spec = SOLVERS[choice(name, SOLVERS, "solver")]
+    if anderson and not spec.anderson:
+        raise ConfigError(f"anderson mixing is an option of the fixed-point solver, not {name!r}")
+    return spec.make(rtol, anderson)
+
+
+def make_method(name: str, solver: NonlinearSolver | None = None) -> Method:
+    """The method called ``name`` (:data:`METHODS`) with ``solver`` (default: fixed point)."""
+    spec = METHODS[choice(name, METHODS, "method")]
+    if not spec.implicit:
+        if solver is not None:
+            raise ConfigError(f"method {name!r} is explicit: it takes no nonlinear solver")
+        return spec.make(None)
+    return spec.make(solver if solver is not None else FixedPoint())
