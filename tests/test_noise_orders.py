@@ -1,11 +1,15 @@
 """Strong order 1/2 and weak order 1 of the stochastic isospectral midpoint (issue 22).
 
 The stochastic rigid body on so(3) (inertia of the paper, three non-commuting noise fields of
-amplitude 1), ``M = 2000`` paths (seed 1) to ``T = 1``. Every coarse step uses the sum of the
+amplitude 1), ``M = 8000`` paths (seed 1) to ``T = 1``. Every coarse step uses the sum of the
 increments of the fine steps it covers, so the coarse solutions lie on the Brownian paths of the
-fine-step reference (``h = 2^-8``). The slopes are fitted over ``h = 2^-3 .. 2^-6`` and must be
+fine-step reference (``h_ref = 2^-8``). The slopes are fitted over ``h = 2^-3 .. 2^-6`` against
+``h - h_ref`` (what the differences to the reference measure: ``C h - C h_ref``) and must be
 within 0.15 of 1/2 (root-mean-square error) and of 1 (error of the mean of ``W_12 + W_13 +
-W_23``, estimated on the coupled paths with a standard error far below it, checked).
+W_23``). The weak errors are means of differences of size ``sqrt(h)`` per path, so their
+standard errors are not small: the weak slope is a fit weighted by them, and its own standard
+error must be below 0.075 (0.15 is then two of them; with 2000 paths it was 0.12 and the fitted
+slope ranged over 0.8 .. 1.2 with the seed). About 30 s on a loaded machine: marked slow.
 """
 
 from __future__ import annotations
@@ -14,13 +18,14 @@ import dataclasses
 from typing import Any
 
 import numpy as np
+import pytest
 
 import isoflow as iso
 from isoflow import noise
 from isoflow._compiled import stages
 
 FINE = 2**8
-M = 2000
+M = 8000
 _INCREMENTS = noise.brownian_increments(1, np.arange(M), 0, FINE, 3, 1.0 / FINE, truncation=None)
 
 
@@ -40,6 +45,7 @@ class _OnTheFinePath(iso.StochasticIsoMP):
 stages.register(_OnTheFinePath, stages.stage_for(iso.StochasticIsoMP()))  # its compiled stage
 
 
+@pytest.mark.slow
 def test_strong_order_one_half_and_weak_order_one_on_the_same_brownian_paths() -> None:
     prob, W0 = iso.models.rigid_body(3, noise=1.0, noise_seed=1)
     Y0 = np.stack([W0] * M)
@@ -60,8 +66,10 @@ def test_strong_order_one_half_and_weak_order_one_on_the_same_brownian_paths() -
         diff = (Y - ref)[:, [0, 0, 1], [1, 2, 2]].sum(axis=1)
         weak.append(abs(diff.mean()))
         weak_se.append(diff.std() / np.sqrt(M))
-    assert np.all(np.array(weak) > 3 * np.array(weak_se))  # the weak errors are resolved
-    strong_order = np.polyfit(np.log(hs), np.log(strong), 1)[0]
-    weak_order = np.polyfit(np.log(hs), np.log(weak), 1)[0]
+    x = np.log(np.array(hs) - 1.0 / FINE)
+    strong_order = np.polyfit(x, np.log(strong), 1)[0]
+    relative_se = np.array(weak_se) / np.array(weak)  # the standard errors of log(weak)
+    (weak_order, _), cov = np.polyfit(x, np.log(weak), 1, w=1 / relative_se, cov="unscaled")
     assert abs(strong_order - 0.5) < 0.15, strong_order
+    assert np.sqrt(cov[0, 0]) < 0.075, (cov, weak, weak_se)
     assert abs(weak_order - 1.0) < 0.15, (weak_order, weak, weak_se)

@@ -4,15 +4,22 @@ Increments
 ----------
 :func:`standard_normals` and :func:`brownian_increments` give the normals and increments of the
 steps ``k0 + 1 .. k0 + nsteps`` of ensemble members, one array ``(nsteps, members, count)`` per
-call. They come from numpy's counter-based generator :class:`numpy.random.Philox`
-(Philox4x64-10): member ``m`` of a run seeded ``seed`` draws with the key ``(seed, m)``, and the
-normals of step ``k`` are the normal quantiles (Wichura's AS 241) of the uniforms of the blocks
-at the counters ``(j, k, stream, 0)``, ``j = 0, 1, ...`` (four normals a block). A step's
-normals are therefore a function of ``(seed, stream, member, step)`` alone: a run, its resume
-after a kill, an ensemble split into the tasks of a sweep (give the members their ids in the
-sweep) and any number of threads draw exactly the same increments, bit for bit. ``stream``
-separates independent uses of one seed (transport noise is stream ``0``; a stochastic forcing
-takes another).
+call. They come from numpy's counter-based bit generator :class:`numpy.random.Philox`
+(Philox4x64-10, four 64-bit words a block) with the key ``(seed, stream)``. Member ``m`` owns
+``b = ceil(count / 4)`` blocks of each step: its raw words of step ``k`` are the first ``4 b``
+that ``Philox(key=(seed, stream), counter=m b + 2**64 k)`` returns (the counter's low word
+numbers the member's blocks, the next word the step), of which the first ``count`` are used.
+Each word becomes the uniform ``((w >> 12) + 1/2) 2**-52``, a midpoint of the grid of ``2**52``
+cells of ``(0, 1)``: exact in double precision, symmetric about 1/2, never 0 or 1 (with 53 bits,
+``2**53 - 1/2`` would round up to ``2**53`` and the top word give 1), and that its normal
+quantile (:func:`scipy.special.ndtri`), finite (at most 8.21 in size). A step's normals are
+therefore a function of ``(seed, stream, member, step)`` alone: a run, its resume after a kill,
+an ensemble split into the tasks of a sweep (give the members their ids in the sweep) and any
+number of threads draw exactly the same increments, bit for bit. Members with consecutive ids have
+consecutive counters, so one bit generator draws a step of a whole run of them at once (the
+cost is the raw draws and the quantiles, not one generator per member). ``stream`` separates
+independent uses of one seed (transport noise is stream ``0``; a stochastic forcing takes
+another).
 
 Large steps: truncated increments
 ---------------------------------
@@ -71,6 +78,11 @@ Array = NDArray[Any]
 TRANSPORT_STREAM = 0
 #: Largest seed (the first word of the Philox key).
 _SEED_MAX = 2**64 - 1
+#: A 52-bit integer plus 1/2 times this is a double in (0, 1), exactly.
+_TWO_TO_MINUS_52 = 2.0**-52
+#: Members whose ids are at most this many raw words apart are drawn by one positioning of the
+#: bit generator (a positioning costs about as much as a few hundred words).
+_BRIDGE_WORDS = 256
 
 
 def check_seed(seed: Any, what: str = "seed") -> int:
@@ -108,6 +120,12 @@ def standard_normals(
     nsteps`` (see the module docstring); members ``< 0`` (padding) get zeros; ``clip`` clips
     them to ``[-clip, clip]``.
 
+    Raises
+    ------
+    ParameterError
+        A seed, stream, step or count that is not an integer ``>= 0``; a member id too large
+        for the counter (``(id + 1) ceil(count / 4) >= 2**64``).
+
     Examples
     --------
     >>> import numpy as np
@@ -117,23 +135,91 @@ def standard_normals(
     >>> bool(np.array_equal(a[4:, 1], b[:, 0]))
     True
     """
-    from ._noise_kernels import fill_normals
-
     seed = check_seed(seed)
     _counts(k0, nsteps, count)
     stream = check_seed(stream, "stream")
     ids = _members(members)
-    out = np.empty((nsteps, ids.size, count))
-    if out.size:
-        fill_normals(
-            out,
-            np.uint64(seed),
-            ids,
-            int(k0),
-            np.uint64(stream),
-            0.0 if clip is None else float(clip),
+    blocks = -(-count // 4)
+    if ids.size and int(ids.max()) >= (_SEED_MAX + 1) // max(blocks, 1) - 1:
+        raise ParameterError(
+            f"member id {int(ids.max())} is too large for {count} normals a step (the "
+            "counter holds (id + 1) * ceil(count / 4) < 2**64)"
         )
+    out = np.zeros((nsteps, ids.size, count))
+    if out.size:
+        raw = _raw_words(seed, stream, ids, int(k0), nsteps, blocks)
+        _normals_from_words(raw[..., :count], out, clip)
+        out[:, ids < 0] = 0.0
     return out
+
+
+def _spans(ids: NDArray[np.int64], words: int) -> tuple[list[tuple[int, int]], NDArray[np.intp]]:
+    """The spans of member ids one bit generator draws at once, and where each valid id's words
+    sit in their concatenation.
+
+    Returns ``(spans, rows)``: ``spans`` lists ``(first id, length)``; the words of ``ids[j] >=
+    0`` are row ``rows[i]`` of the concatenated spans' ``(sum of lengths, words)`` draws, ``i``
+    counting the valid ids. Ids closer than :data:`_BRIDGE_WORDS` words share a span (drawing
+    the members between is cheaper than positioning the generator again); the draws do not
+    depend on the spans.
+    """
+    unique, inverse = np.unique(ids[ids >= 0], return_inverse=True)
+    if unique.size == 0:
+        return [], np.zeros(0, dtype=np.intp)
+    split = np.flatnonzero((np.diff(unique) - 1) * words > _BRIDGE_WORDS) + 1
+    starts = np.concatenate([[0], split])
+    stops = np.concatenate([split, [unique.size]])
+    first = unique[starts]
+    lengths = unique[stops - 1] - first + 1
+    offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    span_of = np.repeat(np.arange(starts.size), stops - starts)
+    rows = offsets[span_of] + unique - first[span_of]
+    spans = [(int(f), int(n)) for f, n in zip(first, lengths, strict=True)]
+    return spans, rows[inverse]
+
+
+def _raw_words(
+    seed: int, stream: int, ids: NDArray[np.int64], k0: int, nsteps: int, blocks: int
+) -> NDArray[np.uint64]:
+    """The raw words ``(nsteps, len(ids), 4 blocks)`` of the steps ``k0 + 1 ..`` (ids ``< 0``
+    draw none): one positioning of one bit generator per step and span (:func:`_spans`)."""
+    words = 4 * blocks
+    raw = np.zeros((nsteps, ids.size, words), dtype=np.uint64)
+    spans, rows = _spans(ids, words)
+    valid = ids >= 0
+    drawn = np.empty((sum(n for _, n in spans), words), dtype=np.uint64)
+    bitgen = np.random.Philox(key=np.array([seed, stream], dtype=np.uint64))
+    state = bitgen.state
+    for s in range(nsteps):
+        step = (k0 + 1 + s) << 64
+        row = 0
+        for first, length in spans:
+            state["state"]["counter"] = _counter_words(first * blocks + step)
+            state["buffer_pos"] = 4  # an empty buffer: the next draw starts a block
+            bitgen.state = state
+            drawn[row : row + length] = bitgen.random_raw(length * words).reshape(length, words)
+            row += length
+        raw[s, valid] = drawn[rows]
+    return raw
+
+
+def _counter_words(counter: int) -> NDArray[np.uint64]:
+    """The four 64-bit words of a 256-bit Philox counter, lowest first."""
+    mask = (1 << 64) - 1
+    return np.array([(counter >> (64 * i)) & mask for i in range(4)], dtype=np.uint64)
+
+
+def _normals_from_words(raw: NDArray[np.uint64], out: Array, clip: float | None) -> None:
+    """``out = ndtri(((raw >> 12) + 1/2) 2**-52)``, clipped to ``[-clip, clip]`` (``raw`` is
+    overwritten)."""
+    from scipy.special import ndtri
+
+    np.right_shift(raw, np.uint64(12), out=raw)
+    np.add(raw, 0.5, out=out, casting="unsafe")
+    out *= _TWO_TO_MINUS_52
+    ndtri(out, out=out)
+    if clip is not None:
+        np.clip(out, -clip, clip, out=out)
 
 
 def truncation_level(h: float, k: float = 2.0) -> float:
