@@ -148,6 +148,46 @@ def test_bad_noise_on_a_problem_is_a_typed_one_line_error() -> None:
         iso.solve(ids, iso.StochasticIsoMP(), np.stack([W0] * 3), dt=0.1, n_steps=1)
 
 
+_X3 = np.eye(3)
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "message"),
+    [
+        (lambda: iso.models.rigid_body(3, noise=np.zeros((2, 4, 4)), noise_seed=1), ShapeError,
+         r"fields must have shape \(m, 3, 3\) for so\(3\), got \(2, 4, 4\)"),
+        (lambda: iso.models.rigid_body(3, noise=np.ones((3, 3)), noise_seed=1), ShapeError,
+         r"fields must have shape \(m, 3, 3\)"),
+        (lambda: iso.models.rigid_body(3, noise=np.ones((1, 3, 3)), noise_seed=1), InvalidBError,
+         r"field 0 is not in the normalizer so\(3\)"),
+        (lambda: iso.models.rigid_body(3, noise=1j * np.eye(3)[None], noise_seed=1),
+         InvalidBError, "complex fields cannot act on the real space so"),
+        (lambda: iso.models.euler_sphere(8, noise=np.ones((1, 8, 8)), noise_seed=1),
+         InvalidBError, r"field 0 is not in the normalizer u\(8\)"),
+        (lambda: iso.models.rigid_body(3, noise=[[["a"]]], noise_seed=1), ParameterError,
+         "rigid_body: noise must be an amplitude or an array of fields"),
+        (lambda: iso.models.rigid_body(3, noise=float("nan"), noise_seed=1), ParameterError,
+         "rigid_body: noise must be a finite number >= 0, got nan"),
+        (lambda: iso.models.sphere_vortices(_X3, [1, 1, 1], noise=-0.1, noise_seed=1),
+         ParameterError, "sphere_vortices: noise must be a finite number >= 0"),
+        (lambda: iso.models.sphere_vortices(_X3, [1, 1, 1], noise=0.1), ParameterError,
+         "sphere_vortices: noise_seed is required"),
+        (lambda: iso.models.euler_sphere(8, noise=0.1), ParameterError,
+         "euler_sphere: noise_seed is required"),
+        (lambda: iso.models.rigid_body(3, noise=0.1, noise_seed=-1), ParameterError,
+         r"rigid_body: noise_seed must be in \[0, 2\*\*64\), got -1"),
+        (lambda: TransportNoise(site=-1.0, seed=1), ParameterError,
+         "site must be a number >= 0 or one per particle, got -1.0"),
+        (lambda: iso.StochasticIsoMP(truncation=0), ParameterError,
+         "truncation must be a number k >= 1 or None, got 0"),
+    ],
+)  # fmt: skip
+def test_bad_noise_input_of_the_models_is_a_one_line_typed_error(call, error, message) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(error, match=message) as info:
+        call()
+    assert type(info.value) is error and "\n" not in str(info.value)
+
+
 def test_zero_noise_is_isomp_from_the_state_bit_for_bit() -> None:
     noisy, W0 = _rigid(sigma=0.0)
     prob = dataclasses.replace(noisy, noise=None)

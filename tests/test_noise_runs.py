@@ -3,14 +3,17 @@ of a sweep against one ensemble of all its members (issue 22)."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import isoflow as iso
 from cli_helpers import isoflow_cmd as _cmd
 from cli_helpers import kill_when as _kill_when
+from cli_helpers import one_error_line, run_cli
 from isoflow import io
 
 ARGS = [
@@ -61,3 +64,21 @@ def test_the_tasks_of_a_sweep_draw_what_one_ensemble_of_its_members_draws(tmp_pa
         idx = [m.index for m in t.members]
         assert ys.tobytes() == whole.ys[:, idx].tobytes()
     assert not np.array_equal(whole.ys[-1, 0], whole.ys[-1, 2])
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--noise", "0.3", "--method", "stochastic-isomp"], "rigid_body: noise_seed is required"),
+        (["--noise", "0.3", "--noise-seed", "1"],
+         "transport noise, which IsoMP would ignore: .* \\(method 'stochastic-isomp'\\)"),
+    ],
+)  # fmt: skip
+def test_noise_mistakes_on_the_command_line_are_one_line_errors(
+    tmp_path: Path, args: list[str], message: str
+) -> None:
+    res = run_cli("run", "rigid-body", "--n", "3", *args, "--dt", "0.1", "--n-steps", "2",
+                  "--out", "x.h5", "--quiet", cwd=tmp_path)  # fmt: skip
+    assert res.returncode == 1
+    assert re.search(message, one_error_line(res.stderr)), res.stderr
+    assert not (tmp_path / "x.h5").exists()

@@ -171,5 +171,5 @@ def refuse_noise(problem: IsospectralProblem, method: Method) -> None:
     if problem.noise is not None and not method.reads_step_data:
         raise ParameterError(
             f"the problem has transport noise, which {method.name} would ignore: integrate it "
-            "with iso.StochasticIsoMP()"
+            "with iso.StochasticIsoMP() (method 'stochastic-isomp')"
         )
