@@ -54,6 +54,7 @@ from .methods import IsoSyRK as IsoSyRK
 from .methods import Method as Method
 from .methods import SphericalMidpoint as SphericalMidpoint
 from .methods import StepResult as StepResult
+from .methods import StochasticHeun as StochasticHeun
 from .methods import StochasticIsoMP as StochasticIsoMP
 from .nonlinear import FixedPoint as FixedPoint
 from .nonlinear import Newton as Newton
@@ -133,6 +134,7 @@ __all__ = [
     "SpinNeighbourSum",
     "StepResult",
     "StepSizeError",
+    "StochasticHeun",
     "StochasticIsoMP",
     "TimeSpanError",
     "UnsupportedAlgebraError",

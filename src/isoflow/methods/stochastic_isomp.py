@@ -102,17 +102,7 @@ class StochasticIsoMP(Method):
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
         """The increments ``(nsteps, members, D)`` of the request (``D`` Brownian motions,
         :meth:`TransportNoise.dimension <isoflow.noise.TransportNoise.dimension>`)."""
-        members = np.asarray(request.members, dtype=np.int64).reshape(-1)
-        noise = problem.noise
-        if noise is None:
-            return np.zeros((request.nsteps, members.size, 0))
-        keys = members
-        if noise.members is not None:
-            keys = np.where(members >= 0, noise.members[np.maximum(members, 0)], -1)
-        return brownian_increments(
-            noise.seed, keys, request.k0, request.nsteps, noise.dimension(problem.algebra),  # type: ignore[arg-type]
-            request.h, stream=TRANSPORT_STREAM, truncation=self.truncation,
-        )  # fmt: skip
+        return transport_increments(problem, request, self.truncation)
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None,
@@ -122,17 +112,44 @@ class StochasticIsoMP(Method):
         base = self.deterministic
         if noise is None or noise.dimension(problem.algebra) == 0:
             return base.step(problem, y, h, None)
-        if data is None:  # one step on its own (iso.step): the first step of members 0..M-1
-            M = int(np.prod(problem.algebra.batch_shape(y), dtype=np.int64))
-            data = self.step_data(problem, StepDataRequest(0, 1, np.arange(M), h))[0]
-            data = data.reshape(*problem.algebra.batch_shape(y), -1)
         alg = problem.algebra
-        db = np.asarray(data, dtype=np.float64).reshape(*alg.batch_shape(y), -1)
+        db = step_increments(self, problem, y, h, data)
         res = base.solver.solve(
             base.stage_problem(_without_jvp(problem, noise), y, h, _noise_term(noise, alg, db, h)),
             y,
         )
         return StepResult.from_solve(alg.project(y + h * res.aux), res, None)
+
+
+def transport_increments(
+    problem: IsospectralProblem, request: StepDataRequest, truncation: float | None
+) -> Array:
+    """The increments ``(nsteps, members, D)`` of the problem's transport noise for
+    ``request``, keyed by the members' ids (:class:`~isoflow.noise.TransportNoise`): the step
+    data of every method for transport noise, so that they step on the same paths."""
+    members = np.asarray(request.members, dtype=np.int64).reshape(-1)
+    noise = problem.noise
+    if noise is None:
+        return np.zeros((request.nsteps, members.size, 0))
+    keys = members
+    if noise.members is not None:
+        keys = np.where(members >= 0, noise.members[np.maximum(members, 0)], -1)
+    return brownian_increments(
+        noise.seed, keys, request.k0, request.nsteps, noise.dimension(problem.algebra),  # type: ignore[arg-type]
+        request.h, stream=TRANSPORT_STREAM, truncation=truncation,
+    )  # fmt: skip
+
+
+def step_increments(
+    method: Method, problem: IsospectralProblem, y: Array, h: float, data: Array | None
+) -> Array:
+    """The step's increments ``(*batch, D)``: ``data`` as the time loop hands it, or, for one
+    step on its own (``iso.step``), those of the first step of the members ``0 .. M - 1``."""
+    batch = problem.algebra.batch_shape(y)
+    if data is None:
+        M = int(np.prod(batch, dtype=np.int64))
+        data = method.step_data(problem, StepDataRequest(0, 1, np.arange(M), h))[0]
+    return np.asarray(data, dtype=np.float64).reshape(*batch, -1)
 
 
 def _noise_term(

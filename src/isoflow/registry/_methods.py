@@ -21,6 +21,7 @@ from ..methods import (
     IsoSyRK,
     Method,
     SphericalMidpoint,
+    StochasticHeun,
     StochasticIsoMP,
 )
 from ..methods.composition import SCHEMES
@@ -112,6 +113,12 @@ METHODS: dict[str, MethodSpec] = {
         "stochastic-isomp",
         _plain(StochasticIsoMP),
         "stochastic isospectral midpoint (models with noise or a temperature)",
+    ),
+    "stochastic-heun": MethodSpec(
+        "stochastic-heun",
+        lambda solver: StochasticHeun(),
+        "stochastic Heun (explicit; not isospectral: a baseline for stochastic-isomp)",
+        implicit=False,
     ),
     **{
         f"isosyrk-{s}": MethodSpec(
