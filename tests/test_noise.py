@@ -18,6 +18,7 @@ from scipy.special import ndtri
 import isoflow as iso
 from isoflow import noise
 from isoflow._errors import InvalidBError, ParameterError, ShapeError
+from isoflow.methods._base import StepDataRequest
 from isoflow.noise import TransportNoise
 
 # ---- the generator ------------------------------------------------------------------------------
@@ -86,6 +87,16 @@ def test_normals_have_mean_zero_variance_one_and_no_step_correlation() -> None:
     assert abs(z.var() - 1) < 5 * math.sqrt(2 / n)
     lag = float(np.mean(z[1:] * z[:-1]))  # consecutive steps of one member
     assert abs(lag) < 5 / math.sqrt(z[1:].size)
+
+
+@pytest.mark.parametrize("method", [iso.StochasticIsoMP, iso.StochasticHeun])
+def test_substeps_sum_the_increments_of_the_finer_steps(method) -> None:  # type: ignore[no-untyped-def]
+    prob, _ = iso.models.rigid_body(3, noise=0.5, noise_seed=4)
+    request = StepDataRequest(2, 3, np.array([1, -1, 0]), 0.4)  # steps 3..5 of h = 0.4
+    coarse = method(substeps=4).step_data(prob, request)
+    fine = noise.brownian_increments(4, [1, -1, 0], 8, 12, 3, 0.1)  # steps 9..20 of h = 0.1
+    assert np.array_equal(coarse, fine.reshape(3, 4, 3, 3).sum(axis=1))
+    assert not coarse[:, 1].any()
 
 
 def test_truncated_increments_stay_within_the_level() -> None:
@@ -180,6 +191,8 @@ _X3 = np.eye(3)
          "site must be a number >= 0 or one per particle, got -1.0"),
         (lambda: iso.StochasticIsoMP(truncation=0), ParameterError,
          "truncation must be a number k >= 1 or None, got 0"),
+        (lambda: iso.StochasticHeun(substeps=0), ParameterError,
+         "substeps must be an integer >= 1, got 0"),
     ],
 )  # fmt: skip
 def test_bad_noise_input_of_the_models_is_a_one_line_typed_error(call, error, message) -> None:  # type: ignore[no-untyped-def]

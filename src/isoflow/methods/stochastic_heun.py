@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from ..noise import check_truncation
 from ..problems import IsospectralProblem
 from ._base import Method, StepDataRequest, StepResult
-from .stochastic_isomp import step_increments, transport_increments
+from .stochastic_isomp import check_substeps, step_increments, transport_increments
 
 __all__ = ["StochasticHeun"]
 
@@ -44,6 +44,9 @@ class StochasticHeun(Method):
     ----------
     truncation : float or None
         As :class:`~isoflow.StochasticIsoMP` (default 2): the increments are the same.
+    substeps : int
+        As :class:`~isoflow.StochasticIsoMP` (default 1): steps on the Brownian path of a run
+        with ``substeps`` times smaller steps.
 
     Examples
     --------
@@ -55,6 +58,7 @@ class StochasticHeun(Method):
     """
 
     truncation: float | None = 2.0
+    substeps: int = 1
 
     order: ClassVar[int] = 1
     implicit: ClassVar[bool] = False
@@ -64,10 +68,11 @@ class StochasticHeun(Method):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "truncation", check_truncation(self.truncation))
+        check_substeps(self.substeps)
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
         """The increments ``(nsteps, members, D)`` (those of :class:`~isoflow.StochasticIsoMP`)."""
-        return transport_increments(problem, request, self.truncation)
+        return transport_increments(problem, request, self.truncation, self.substeps)
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None,

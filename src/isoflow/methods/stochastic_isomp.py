@@ -65,6 +65,11 @@ class StochasticIsoMP(Method):
         ``k`` of the truncated increments :math:`\sqrt h\,\zeta`, :math:`|\zeta| \le A_h =
         \sqrt{2k|\ln h|}` (default 2: strong order 1/2 and weak order 1 kept); ``None`` draws
         Gaussian increments (a step whose solve then diverges fails its member).
+    substeps : int
+        A step's increments are the sums of those of ``substeps`` steps of size ``h /
+        substeps`` (truncated at that size): a run with step ``h`` then lies on the Brownian
+        path of the run with step ``h / substeps`` and the same seed, which is what a
+        strong-convergence study compares (default 1: the step's own increments).
 
     Notes
     -----
@@ -83,6 +88,7 @@ class StochasticIsoMP(Method):
 
     solver: NonlinearSolver = field(default_factory=FixedPoint)
     truncation: float | None = 2.0
+    substeps: int = 1
 
     order: ClassVar[int] = 1
     implicit: ClassVar[bool] = True
@@ -93,6 +99,7 @@ class StochasticIsoMP(Method):
     def __post_init__(self) -> None:
         check_implicit_options(self.solver, "state")
         object.__setattr__(self, "truncation", check_truncation(self.truncation))
+        check_substeps(self.substeps)
 
     @property
     def deterministic(self) -> IsoMP:
@@ -102,7 +109,7 @@ class StochasticIsoMP(Method):
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
         """The increments ``(nsteps, members, D)`` of the request (``D`` Brownian motions,
         :meth:`TransportNoise.dimension <isoflow.noise.TransportNoise.dimension>`)."""
-        return transport_increments(problem, request, self.truncation)
+        return transport_increments(problem, request, self.truncation, self.substeps)
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None,
@@ -121,12 +128,22 @@ class StochasticIsoMP(Method):
         return StepResult.from_solve(alg.project(y + h * res.aux), res, None)
 
 
+def check_substeps(substeps: Any) -> int:
+    """``substeps`` as an int ``>= 1``, else a one-line :class:`ParameterError`."""
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ParameterError(f"substeps must be an integer >= 1, got {substeps!r}")
+    return int(substeps)
+
+
 def transport_increments(
-    problem: IsospectralProblem, request: StepDataRequest, truncation: float | None
-) -> Array:
+    problem: IsospectralProblem, request: StepDataRequest, truncation: float | None,
+    substeps: int = 1,
+) -> Array:  # fmt: skip
     """The increments ``(nsteps, members, D)`` of the problem's transport noise for
     ``request``, keyed by the members' ids (:class:`~isoflow.noise.TransportNoise`): the step
-    data of every method for transport noise, so that they step on the same paths."""
+    data of every method for transport noise, so that they step on the same paths. With
+    ``substeps = r``, step ``k``'s increments are the sums of those of the steps ``r (k - 1) +
+    1 .. r k`` of size ``h / r``."""
     members = np.asarray(request.members, dtype=np.int64).reshape(-1)
     noise = problem.noise
     if noise is None:
@@ -134,10 +151,15 @@ def transport_increments(
     keys = members
     if noise.members is not None:
         keys = np.where(members >= 0, noise.members[np.maximum(members, 0)], -1)
-    return brownian_increments(
-        noise.seed, keys, request.k0, request.nsteps, noise.dimension(problem.algebra),  # type: ignore[arg-type]
-        request.h, stream=TRANSPORT_STREAM, truncation=truncation,
+    r = substeps
+    D = noise.dimension(problem.algebra)
+    fine = brownian_increments(
+        noise.seed, keys, request.k0 * r, request.nsteps * r, D, request.h / r,  # type: ignore[arg-type]
+        stream=TRANSPORT_STREAM, truncation=truncation,
     )  # fmt: skip
+    if r == 1:
+        return fine
+    return fine.reshape(request.nsteps, r, members.size, D).sum(axis=1)
 
 
 def step_increments(
