@@ -131,7 +131,8 @@ def test_thermal_lattice_matches_metropolis_monte_carlo(temperature: float) -> N
     # agree within 4 combined standard errors of 10 batch means each (0.002 to 0.008). Measured:
     # (LLG - MC) / s.e. = 1.9, 2.8, 0.3 for the energy, -0.4, -1.4, 1.2 for m_z; the LLG energy
     # sits above Monte Carlo at every temperature, which the O(h) bias of a weak-order-1 method
-    # would explain (runs at h = 0.005 .. 0.02 did not resolve it). About 3 s a temperature.
+    # would explain (runs at h = 0.005 .. 0.02 did not resolve it). About 9 s a temperature on a
+    # loaded 2-core machine.
     prob, s0 = iso.models.spin_lattice(
         (_L, _L), J=_J, field=tuple(_FIELD), temperature=temperature, damping=1.0,
         noise_seed=3, initial="ferro",
