@@ -17,22 +17,22 @@ the initial guess, the state instead of IsoMP's extrapolation, which costs itera
 IsoMP started from the state (``isomp_from_state_*``) separates the two. Target: ratio
 stochastic / IsoMP <= 1.3 per step. Run alone: ``python benchmarks/bench_18_stochastic.py``.
 
-**Missed** (2 cores shared with other work, load about 8, ratios timed alternately): spin chain
-9.3 (stochastic 96 ms a step, IsoMP 10.3 ms, IsoMP from the state 9.5 ms; 17, 14 and 17
-iterations), ensemble 3.5 (306 ms, 88 ms, 161 ms; 9.3, 3.0 and 6.5 iterations a member). Why:
+**Missed** (2 cores shared with other work, load about 5, ratios timed alternately): spin chain
+4.1 (stochastic 17.3 ms a step, IsoMP 4.2 ms, IsoMP from the state 4.0 ms; 17, 14 and 17
+iterations), ensemble 3.3 (168 ms, 50 ms, 110 ms; 9.3, 3.0 and 6.5 iterations a member). Why:
 
-* the chain's stochastic stage runs the generic blocks of the ``(3, N)`` layout (evaluate
-  ``B``, the bracket, the stage map, the noise: four passes, one thread), IsoMP its fused
-  parallel sweep (one pass, 72 bytes a spin): 4.2 ms against 0.56 ms an iteration. A fused
-  sweep with the site noise read from the step data is the fix (not done);
-* drawing ``3 * 10^5`` normals takes 24 ms a step (numpy's Philox and ``ndtri`` on one thread,
-  about 80 ns a normal on this loaded machine): 2.4 IsoMP steps by itself. Only threads would
-  lower it (the draws of disjoint counter ranges are independent);
-* the ensemble's stochastic step starts from the state: the stage offsets of a noisy path are
-  not smooth in time, so IsoMP's extrapolation does not apply, and the noise moves the stage
-  further from the state (9.3 iterations against 6.5 for IsoMP from the state, 3.0 with its
-  extrapolation). Per iteration the stochastic stage costs 1.3 times IsoMP's (the noise term
-  on the lanes). The increments are 0.4 % of the step.
+* the chain: drawing ``3 * 10^5`` normals takes 10.8 ms a step, 2.6 IsoMP steps by itself
+  (numpy's Philox about 7 ns a word, ``scipy.special.ndtri`` about 25 ns a normal, one
+  thread; two threads gained nothing on this machine). The stage itself, IsoMP's fused sweep
+  with the site noise read in it, costs 0.38 ms an iteration against IsoMP's 0.3 (it was
+  4.2 ms on the generic blocks before the sweep was fused). Reaching 1.3 needs cheaper
+  normals (threads on an idle machine, or a normal transform cheaper than ``ndtri``);
+* the ensemble: the stochastic step starts from the state. The stage offsets of a noisy path
+  are not smooth in time, so IsoMP's extrapolation does not apply, and the noise moves the
+  stage further from the state: 9.3 iterations against 6.5 for IsoMP from the state and 3.0
+  with its extrapolation. Per iteration the two cost the same (18 ms against 17); the
+  increments are 0.3 % of the step. Extrapolating the deterministic part of the offset and
+  adding the step's noise part would be the fix (not done).
 """
 
 from __future__ import annotations

@@ -8,11 +8,11 @@ under :class:`isoflow.StochasticIsoMP` against the lattice without noise and dam
 timed alternately; time per spin-step. Target: ratio <= 1.5. Run alone:
 ``python benchmarks/bench_19_thermal_lattice.py``.
 
-**Missed**: 3.3 (2 cores shared with other work, load about 8): 1035 against 312 ns a spin-step
-(68 ms and 20 ms a step). Why: 19 iterations a step against IsoMP's 12 (15 from the state: the
-damping and the noise move the stage further), 2.8 ms an iteration against 1.5 (the generic
-noise term of :mod:`isoflow._compiled.stages.stochastic_isomp`, a serial pass over the sites
-inside each iteration), and 14 ms a step drawing ``2 * 65536 * 3`` normals on one thread
+**Missed**: 3.2 (2 cores shared with other work, load about 5): 646 against 201 ns a
+spin-step (42 ms and 13 ms a step). Why: 19 iterations a step against IsoMP's 12 (15 from the
+state: the damping and the noise move the stage further, and a noisy path has no smooth history
+to extrapolate), 1.75 ms an iteration against 1.1 (the Gilbert term in ``B`` and the noise term,
+a gather over the sites, in every iteration), and 9 ms a step drawing ``3 * 65536`` normals
 (benchmark 18 says more).
 """
 

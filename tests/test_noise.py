@@ -273,3 +273,19 @@ def test_stochastic_vortices_and_sphere_keep_their_casimirs_on_every_path() -> N
     sol = iso.solve(prob, iso.StochasticIsoMP(), Q, dt=0.05, n_steps=20, progress=False)
     assert "compiled" in sol.stats.runner
     assert float(np.max(sol.diagnostics.casimir_drift)) < 1e-13
+
+
+def test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps() -> None:
+    # site noise and one constant field on the Heisenberg chain (the (3, N) layout's fused
+    # sweep) against the NumPy path: the same steps to rounding, |S_i| kept
+    prob, w0 = iso.models.heisenberg_chain(30, initial="random", seed=1)
+    field = np.zeros((1, 30, 3))
+    field[0, :, 2] = 0.2
+    noisy = dataclasses.replace(prob, noise=TransportNoise(field, seed=2, site=0.3))
+    kw = {"dt": 0.02, "n_steps": 50, "progress": False}
+    fused = iso.solve(noisy, iso.StochasticIsoMP(), w0, **kw)
+    plain = iso.solve(dataclasses.replace(noisy, kernel=None), iso.StochasticIsoMP(), w0, **kw)
+    assert "spin chain" in fused.stats.runner and plain.stats.runner == "NumPy"
+    assert float(np.abs(fused.ys - plain.ys).max()) < 1e-12
+    assert float(np.abs(fused.ys[-1] - w0).max()) > 0.05
+    assert float(np.abs(np.linalg.norm(fused.ys, axis=-1) - 1).max()) < 1e-13

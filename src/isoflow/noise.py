@@ -51,7 +51,7 @@ motions per particle, amplitude :math:`\sigma_p`: the thermal field of a spin). 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -145,11 +145,13 @@ def standard_normals(
             f"member id {int(ids.max())} is too large for {count} normals a step (the "
             "counter holds (id + 1) * ceil(count / 4) < 2**64)"
         )
-    out = np.zeros((nsteps, ids.size, count))
+    out = np.empty((nsteps, ids.size, count))
     if out.size:
-        raw = _raw_words(seed, stream, ids, int(k0), nsteps, blocks)
-        _normals_from_words(raw[..., :count], out, clip)
-        out[:, ids < 0] = 0.0
+        for s, raw in enumerate(_raw_words(seed, stream, ids, int(k0), nsteps, blocks)):
+            _normals_from_words(raw[:, :count], out[s], clip)  # a step at a time: in cache
+        padding = ids < 0
+        if padding.any():
+            out[:, padding] = 0.0
     return out
 
 
@@ -180,14 +182,21 @@ def _spans(ids: NDArray[np.int64], words: int) -> tuple[list[tuple[int, int]], N
 
 def _raw_words(
     seed: int, stream: int, ids: NDArray[np.int64], k0: int, nsteps: int, blocks: int
-) -> NDArray[np.uint64]:
-    """The raw words ``(nsteps, len(ids), 4 blocks)`` of the steps ``k0 + 1 ..`` (ids ``< 0``
-    draw none): one positioning of one bit generator per step and span (:func:`_spans`)."""
+) -> Iterator[NDArray[np.uint64]]:
+    """The raw words ``(len(ids), 4 blocks)`` of each step ``k0 + 1 .. k0 + nsteps`` in turn,
+    in one buffer (the rows of ids ``< 0`` are left unset): one positioning of one bit
+    generator per step and span (:func:`_spans`)."""
     words = 4 * blocks
-    raw = np.zeros((nsteps, ids.size, words), dtype=np.uint64)
-    spans, rows = _spans(ids, words)
-    valid = ids >= 0
-    drawn = np.empty((sum(n for _, n in spans), words), dtype=np.uint64)
+    raw = np.empty((ids.size, words), dtype=np.uint64)
+    # consecutive ids (an ensemble 0..M-1, one member): the draws land in their rows directly
+    direct = bool(ids[0] >= 0 and np.all(np.diff(ids) == 1))
+    if direct:
+        spans, rows = [(int(ids[0]), int(ids.size))], None
+        drawn = raw
+    else:
+        spans, rows = _spans(ids, words)
+        valid = ids >= 0
+        drawn = np.empty((sum(n for _, n in spans), words), dtype=np.uint64)
     bitgen = np.random.Philox(key=np.array([seed, stream], dtype=np.uint64))
     state = bitgen.state
     for s in range(nsteps):
@@ -199,8 +208,9 @@ def _raw_words(
             bitgen.state = state
             drawn[row : row + length] = bitgen.random_raw(length * words).reshape(length, words)
             row += length
-        raw[s, valid] = drawn[rows]
-    return raw
+        if not direct:
+            raw[valid] = drawn[rows]
+        yield raw
 
 
 def _counter_words(counter: int) -> NDArray[np.uint64]:

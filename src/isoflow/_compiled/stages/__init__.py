@@ -221,5 +221,12 @@ register(
         params=stochastic_isomp.noise_params,
         takes=stochastic_isomp.compiled_noise,
         step_data=_method_step_data,
+        specializations={
+            SpinChain: Specialization(
+                spin_chain.stochastic_sweeps,
+                1,
+                "benchmark 18: IsoMP's fused sweep with the noise read in it",
+            ),
+        },
     ),
 )

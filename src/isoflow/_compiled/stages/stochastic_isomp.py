@@ -47,16 +47,15 @@ def add_noise(lay, mp, sd, h, B):  # type: ignore[no-untyped-def]
     m = fields.shape[0]
     L = blocks.lanes(lay)
     inv = 1.0 / h
+    S = B.shape[0]
     for i in range(m):
         Fi = fields[i]
-        for e in range(B.shape[0]):
-            c = sd[e % L, i]
-            if c != 0.0:
-                B[e] += (c * inv) * Fi[e]
+        for e0 in range(0, S, L):  # entry e0 + q belongs to lane q
+            for q in range(L):
+                B[e0 + q] += (sd[q, i] * inv) * Fi[e0 + q]
+    row = sd[0]
     for j in range(site_pos.shape[0]):
-        c = sd[0, m + j]
-        if c != 0.0:
-            B[site_pos[j]] += (c * inv) * site_amp[j]
+        B[np.uint64(site_pos[j])] += (row[np.uint64(m + j)] * inv) * site_amp[j]
 
 
 @numba.njit(cache=True)
