@@ -260,6 +260,17 @@ def test_ensemble_statistics_are_the_members_sample_moments_without_the_failed()
                                                    n_steps=2, progress=False))  # fmt: skip
 
 
+def test_the_registry_builds_the_noisy_models_from_their_parameters() -> None:
+    make = iso.registry.MODELS
+    prob, _ = make["euler-sphere"].make({"N": 8, "noise": 0.05, "noise_seed": 2})
+    assert prob.noise.count == 8 and prob.noise.seed == 2
+    prob, _ = make["rigid-body"].make({"n": 4, "noise": 0.1, "noise_seed": 3})
+    assert prob.noise.count == 6 and prob.noise.seed == 3
+    prob, _ = make["spin-lattice"].make({"shape": [3, 3], "temperature": 0.5, "damping": 0.2,
+                                         "noise_seed": 4})  # fmt: skip
+    assert prob.noise.site == pytest.approx(math.sqrt(2 * 0.2 * 0.5))
+
+
 def test_stochastic_vortices_and_sphere_keep_their_casimirs_on_every_path() -> None:
     x0 = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]])
     prob, x = iso.models.sphere_vortices(x0, [1.0, 2.0, -0.5], noise=0.3, noise_seed=1)

@@ -305,6 +305,13 @@ MODELS: dict[str, ModelSpec] = {
                     float, None, "energy spectrum E_l ~ l^slope of the data (white if unset)"
                 ),
                 "rms": Param(float, 1.0, "root-mean-square initial vorticity", low=0.0),
+                "noise": Param(
+                    float,
+                    None,
+                    "transport noise on the stream functions of degrees 1, 2",
+                    low=0.0,
+                ),
+                "noise_seed": _noise_seed(),
             },
             "Zeitlin's quantized Euler equations on the (rotating) sphere, su(N)",
             builtin=True,
