@@ -19,6 +19,15 @@ SMALL = {
     "vortices-invariants": {},
     "euler-sphere": {"N": 8, "T": 2.0},
     "mhd-sphere": {"quick": True, "N": 6, "T": 2.0},
+    "stochastic": {
+        "paths": 400,
+        "fine": 6,
+        "coarse": (3, 4),
+        "drift_paths": 8,
+        "drift_T": 0.5,
+        "spins_members": 2,
+        "spins_T": 4.0,
+    },
     "work-precision": {"quick": True, "T": 2.0, "T_long": 10.0},
 }
 

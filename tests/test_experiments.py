@@ -102,3 +102,12 @@ def test_experiments_are_library_functions_with_parameters() -> None:
     assert abs(res.summary["observed_order"]["isomp"] - 2.0) < 0.1
     fig = iso.plotting.plot_experiment(res)
     assert len(fig.axes) == 1
+
+
+def test_stochastic_numbers(results: Path) -> None:
+    s = _summary(results, "stochastic")
+    assert abs(s["observed_order"]["strong"] - 0.5) < 0.15
+    assert s["weak_order_standard_error"] < 0.15  # the weak fit is resolved
+    drift = s["casimir_drift"]
+    assert drift["midpoint"]["max"] <= 1e-13 and drift["heun"]["min"] > 1e-4
+    assert [e["temperature"] for e in s["equilibrium"]] == [0.5, 2.0]
