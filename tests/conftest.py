@@ -1,16 +1,59 @@
-"""Shared test configuration: pin BLAS to one thread so timings stay sane on a busy 2-core box."""
+"""Shared test configuration: pin BLAS to one thread so timings stay sane on a busy 2-core box,
+and keep numba's on-disk cache (``.numba_cache``) true to the sources.
+
+numba's cache checks only the file that defines a function: a compiled loop that inlines a
+block from another module (every stage inlines its layout's blocks) is loaded stale from the
+cache after that block changes. So the cache is emptied whenever the compiled layer's sources
+differ from those it was filled from (a digest in ``.numba_cache/SOURCES``), once per test
+session (by the controlling process, before any worker starts).
+"""
 
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
 from threadpoolctl import threadpool_limits
 
+#: Whether the cache is this repository's own (a cache the user chose is left alone).
+_OWN_CACHE = "NUMBA_CACHE_DIR" not in os.environ
 os.environ.setdefault(
     "NUMBA_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".numba_cache")
 )
+
+#: The sources whose functions other modules' compiled code inlines.
+_INLINED = ("_compiled", "_kernel_fields.py", "sphere/compiled.py")
+
+
+def _compiled_sources_digest() -> str:
+    src = Path(__file__).resolve().parent.parent / "src" / "isoflow"
+    files: list[Path] = []
+    for name in _INLINED:
+        p = src / name
+        files.extend(sorted(p.rglob("*.py")) if p.is_dir() else [p] if p.exists() else [])
+    h = hashlib.sha256()
+    for f in files:
+        h.update(str(f.relative_to(src)).encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    if not _OWN_CACHE or os.environ.get("PYTEST_XDIST_WORKER"):  # the controller did it
+        return
+    cache = Path(os.environ["NUMBA_CACHE_DIR"])
+    stamp = cache / "SOURCES"
+    digest = _compiled_sources_digest()
+    if stamp.exists() and stamp.read_text().strip() == digest:
+        return
+    if cache.exists():
+        shutil.rmtree(cache, ignore_errors=True)
+    cache.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(digest + "\n")
+
 
 _limits = threadpool_limits(limits=1)
 
@@ -18,6 +61,55 @@ settings.register_profile(
     "ci", max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow]
 )
 settings.load_profile("ci")
+
+
+#: Tests marked ``slow`` here rather than in their files: cases of a parametrization (by their
+#: ids) and whole modules. Each took over a minute in a full run on the loaded 2-core machine
+#: (about 10-40 s quiet); ``pytest -m slow`` runs them (CI does), the default run leaves them out.
+#: Each property they check keeps a fast case in the default run where one exists (one layout of
+#: the toy method, one compiled case per layout family, the experiments' figures).
+SLOW = (
+    "tests/test_experiments.py::",
+    "tests/test_sweep.py::test_every_member_equals_a_serial_solve[mhd-sphere]",
+    "tests/test_sweep.py::test_every_member_equals_a_serial_solve[perturbed-heavy-top]",
+    "tests/test_sweep.py::test_client_killed_and_restarted_finishes_like_an_uninterrupted_run",
+    "tests/test_sweep.py::test_a_task_whose_members_all_failed_is_frozen_at_its_last_good_state",
+    "tests/test_semidirect.py::test_compiled_pairs_equal_the_numpy_path[so4]",
+    "tests/test_semidirect.py::test_compiled_pairs_equal_the_numpy_path[su3]",
+    "tests/test_semidirect.py::test_compiled_pairs_equal_the_numpy_path[su20-blas]",
+    "tests/test_registry.py::test_every_builtin_model_builds_with_its_defaults_and_checks_them",
+    "tests/test_cli_user_model.py::test_user_model_streams_and_resumes_bit_for_bit_when_named",
+    "tests/test_cli_user_model.py::test_user_compiled_model_from_toml",
+    "tests/test_cli_app.py::test_run_with_anderson_and_an_old_spelling",
+    "tests/test_isomp.py::test_state_stays_in_space_over_1e5_steps",
+    "tests/test_euler_sphere.py::test_casimirs_at_rounding_over_many_steps[64-1.0-0.05-10000]",
+    "tests/test_compiled.py::test_compiled_equals_numpy[rigid ensemble 20 (blocks)]",
+    "tests/test_compiled.py::test_compiled_equals_numpy[rigid ensemble 5 (members)]",
+    "tests/test_compiled.py::test_compiled_equals_numpy[CompiledB u(7) ensemble 4]",
+    "tests/test_compiled.py::test_compiled_equals_numpy[su(5) ensemble 12 (blocks)]",
+    "tests/test_compiled.py::test_compiled_equals_numpy[u(40) BLAS]",
+    "tests/test_compiled.py::test_compiled_equals_numpy[CompiledB so(36) BLAS]",
+    "tests/test_compiled.py::test_compiled_equals_numpy[sphere vortices ensemble]",
+    *(
+        f"tests/test_conformance.py::test_a_method_written_once_runs_compiled_on_every_layout[{c}]"
+        for c in (
+            "dense, SIMD lanes",
+            "dense, BLAS",
+            "dual pairs, BLAS",
+            "vortices on the sphere",
+            "vortices on the hyperboloid",
+            "(R^3, x)^N",
+            "(R^3, x_L)^N",
+            "spin chain",
+        )
+    ),
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.nodeid.startswith(SLOW):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture

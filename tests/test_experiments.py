@@ -120,3 +120,12 @@ def test_qg_jets_numbers(results: Path) -> None:
     assert ratios == sorted(ratios) and ratios[-1] > 1.5
     assert all(g >= 2.0 for g in s["zonal_share_growth"].values())
     assert all(d["casimir_drift"] < 1e-11 for d in s["drifts"].values())
+
+
+def test_stochastic_numbers(results: Path) -> None:
+    s = _summary(results, "stochastic")
+    assert abs(s["observed_order"]["strong"] - 0.5) < 0.15
+    assert s["weak_order_standard_error"] < 0.15  # the weak fit is resolved
+    drift = s["casimir_drift"]
+    assert drift["midpoint"]["max"] <= 1e-13 and drift["heun"]["min"] > 1e-4
+    assert [e["temperature"] for e in s["equilibrium"]] == [0.5, 2.0]

@@ -276,13 +276,23 @@ def test_environment_variables_bound_every_request(
     monkeypatch.setenv("OMP_NUM_THREADS", "1,1")  # OpenMP's per-level list: the first counts
     assert plan_threads(2, parallel=False).blas == 1
     monkeypatch.delenv("OMP_NUM_THREADS")
-    # numba's own bound, in a run: an ensemble would otherwise run its members on 2 threads
-    monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
-    prob, _ = iso.models.rigid_body(4)
-    W = iso.algebras.so(4).random(seed=0, batch=(64,), scale=0.1)
-    sol = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=2, threads=2)
-    assert "SIMD lanes" in sol.stats.runner  # serial: the 2 cores went to BLAS
-    assert sol.stats.threads == {"cores": CORES, "numba": 1, "blas": 2}
+    # numba's own bound, in a run: an ensemble would otherwise run its members on 2 threads.
+    # In a process of its own: numba reads NUMBA_NUM_THREADS when it starts its pool, and a
+    # pool already running in this process (from an earlier test) cannot be changed.
+    code = (
+        "import json, isoflow as iso\n"
+        "prob, _ = iso.models.rigid_body(4)\n"
+        "W = iso.algebras.so(4).random(seed=0, batch=(64,), scale=0.1)\n"
+        "s = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=2, threads=2).stats\n"
+        "print(json.dumps([s.runner, s.threads]))\n"
+    )
+    env = {**_clean_env(), "NUMBA_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=600, check=False)  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    runner, threads = json.loads(out.stdout.strip().splitlines()[-1])
+    assert "SIMD lanes" in runner  # serial: the 2 cores went to BLAS
+    assert threads == {"cores": CORES, "numba": 1, "blas": 2}
 
 
 @two_cores

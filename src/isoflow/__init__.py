@@ -56,6 +56,8 @@ from .methods import IsoSyRK as IsoSyRK
 from .methods import Method as Method
 from .methods import SphericalMidpoint as SphericalMidpoint
 from .methods import StepResult as StepResult
+from .methods import StochasticHeun as StochasticHeun
+from .methods import StochasticIsoMP as StochasticIsoMP
 from .methods import Strang as Strang
 from .nonlinear import FixedPoint as FixedPoint
 from .nonlinear import Newton as Newton
@@ -66,9 +68,11 @@ from .splitting import ModalLinearPart as ModalLinearPart
 from .splitting import StochasticForcing as StochasticForcing
 
 if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
+    from . import ensemble as ensemble
     from . import experiments as experiments
     from . import io as io
     from . import models as models
+    from . import noise as noise
     from . import plotting as plotting
     from . import registry as registry
     from . import sphere as sphere
@@ -79,7 +83,8 @@ if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
 
 #: Submodules loaded on first attribute access.
 _LAZY_MODULES = frozenset(
-    {"experiments", "io", "models", "plotting", "registry", "sphere", "sweep", "threads"}
+    {"ensemble", "experiments", "io", "models", "noise", "plotting", "registry", "sphere", "sweep"}
+    | {"threads"}
 )
 #: Attributes loaded on first access: name -> (module, attribute).
 _LAZY_ATTRIBUTES = {
@@ -140,11 +145,14 @@ __all__ = [
     "StepResult",
     "StepSizeError",
     "StochasticForcing",
+    "StochasticHeun",
+    "StochasticIsoMP",
     "Strang",
     "TimeSpanError",
     "UnsupportedAlgebraError",
     "__version__",
     "algebras",
+    "ensemble",
     "experiments",
     "io",
     "models",

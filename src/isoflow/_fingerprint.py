@@ -6,7 +6,9 @@ factory module edited, a factor 2 in ``B``), the file would silently mix two flo
 records, when it starts, a fingerprint of its model (:func:`model_fingerprint`), and a resume
 recomputes it and names what differs (:func:`fingerprint_changes`):
 
-* **the model's functions at a probe state**: ``B`` and the functions behind the file's
+* **the model's functions at a probe state**: ``B``, the noise term of a problem with transport
+  noise (its fields at the first member's first increments: the seed and the member ids
+  count) and the functions behind the file's
   diagnostics (the Hamiltonian, the Lyapunov function, the invariants) evaluated at the run's
   first initial state plus a fixed perturbation of relative size :data:`PROBE_SIZE` (generic:
   it breaks the symmetries of special initial states), each summarized by its norm and
@@ -121,6 +123,8 @@ def _values_at(problem: IsospectralProblem, P: Array) -> dict[str, list[float] |
         functions["lyapunov"] = problem.lyapunov
     for name, fn in problem.invariants.items():
         functions[f"invariant {name}"] = fn
+    if problem.noise is not None:
+        functions["noise"] = functools.partial(_noise_probe, problem)
     out: dict[str, list[float] | None] = {}
     for name, fn in functions.items():
         try:
@@ -128,6 +132,18 @@ def _values_at(problem: IsospectralProblem, P: Array) -> dict[str, list[float] |
         except Exception:  # a function undefined at the probe: recorded as such
             out[name] = None
     return out
+
+
+def _noise_probe(problem: IsospectralProblem, P: Array) -> Array:
+    """The noise term of the first member's first step at ``P``: its fields, amplitudes, seed
+    and member id in one value (:class:`~isoflow.noise.TransportNoise`)."""
+    from .noise import standard_normals
+
+    noise = problem.noise
+    assert noise is not None
+    first = 0 if noise.members is None else int(noise.members[0])
+    z = standard_normals(noise.seed, [first], 0, 1, noise.dimension(problem.algebra))[0, 0]  # type: ignore[arg-type]
+    return noise.increment(P, z, problem.algebra)
 
 
 def _plain_function(f: Any) -> Any:

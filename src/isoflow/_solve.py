@@ -28,6 +28,7 @@ from ._writers import StreamWriter
 from .diagnostics import DiagnosticsAccumulator
 from .methods import Composition, Method, Strang
 from .methods._base import StepDataRequest
+from .methods.stochastic_isomp import refuse_noise
 from .problems import IsospectralProblem
 from .splitting import has_split_part
 from .threads import ThreadRequest
@@ -137,6 +138,7 @@ def _check_objects(problem: Any, method: Any, writer: Any = None) -> None:
         )
     if not isinstance(method, Method):
         raise TypeError(f"method must be an isoflow method (e.g. iso.IsoMP()), got {method!r}")
+    refuse_noise(problem, method)
     if writer is not None and not isinstance(writer, StreamWriter):
         hint = (
             "; to write a file, pass iso.io.HDF5Writer(path)"
@@ -191,6 +193,8 @@ def _check_state(
     if W.size == 0:
         raise ShapeError(f"{what} is an empty ensemble (shape {W.shape}): nothing to integrate")
     problem.check_B(W)
+    if problem.noise is not None:  # the members' ids (their noise keys) fit the ensemble
+        problem.noise.member_ids(int(np.prod(problem.algebra.batch_shape(W), dtype=np.int64)))
     return W
 
 

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from ._errors import InvalidBError, ParameterError
 from .algebras import Algebra
 from .kernels import Kernel
+from .noise import TransportNoise
 from .splitting import Forcing, LinearPart, StochasticForcing
 
 __all__ = ["IsospectralProblem"]
@@ -71,6 +72,11 @@ class IsospectralProblem:
         Forcings added to the flow (:class:`~isoflow.Forcing`: deterministic, steady or with
         time-dependent amplitudes; :class:`~isoflow.StochasticForcing`: white noise on modes
         of ``linear_part``). Stored as a tuple.
+    noise : TransportNoise or None
+        Stratonovich transport noise :math:`\sum_i [B_i(W), W] \circ d\beta_i`
+        (:class:`isoflow.noise.TransportNoise`): the problem is then the stochastic
+        Lie–Poisson system :math:`dW = [B(W), W]\,dt + \sum_i [B_i(W), W] \circ d\beta_i`,
+        integrated by :class:`~isoflow.StochasticIsoMP` (the deterministic methods refuse it).
     """
 
     B: Callable[[Array], Array] = None  # type: ignore[assignment]
@@ -85,6 +91,7 @@ class IsospectralProblem:
     kernel: Kernel | None = None
     linear_part: LinearPart | None = None
     forcing: Forcing | StochasticForcing | Sequence[Forcing | StochasticForcing] = ()
+    noise: TransportNoise | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.algebra, Algebra):
@@ -99,6 +106,12 @@ class IsospectralProblem:
                     f"SpinNeighbourSum, PairwiseVortex) or None, got {self.kernel!r}"
                 )
             self.kernel.check(self.algebra)
+        if self.noise is not None:
+            if not isinstance(self.noise, TransportNoise):
+                raise TypeError(
+                    f"noise must be an iso.noise.TransportNoise or None, got {self.noise!r}"
+                )
+            self.noise.check(self.algebra)
         if self.B is None:
             if self.kernel is None:
                 raise TypeError("give B, or a kernel (e.g. iso.CompiledB(f)) to derive it from")

@@ -147,7 +147,7 @@ class CompiledRunner(Runner):
         field = layout.field or problem.kernel.field()  # type: ignore[union-attr]
         self.f: Any = field[0]
         self.fargs: tuple[Any, ...] = field[1]
-        self.mp = stage.params(method, problem, tuple(float(g) * float(h) for g in gammas))
+        self.mp = stage.params(method, problem, layout, tuple(float(g) * float(h) for g in gammas))
         self.stage = stage
         self.method = method
         self.problem = problem

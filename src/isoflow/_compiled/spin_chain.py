@@ -19,8 +19,9 @@ Chains with many spins are cut into chunks over numba threads (the ``*_par`` sta
 
 The record :class:`SpinChain` holds the number of spins, the coupling and the number of chunks.
 The layout also provides the generic blocks (on the ``(3, N)`` layout), so every method with a
-compiled stage runs on it; IsoMP and the spherical midpoint run the fused sweeps below, their
-named specializations (benchmarks 4 and 5).
+compiled stage runs on it; IsoMP, the spherical midpoint and the stochastic midpoint (IsoMP's
+sweep with the step's noise added to ``B_i``) run the fused sweeps below, their named
+specializations (benchmarks 4, 5 and 18).
 """
 
 from __future__ import annotations
@@ -50,12 +51,16 @@ __all__ = [
     "chain_layout",
     "finish_iso",
     "finish_smm",
+    "finish_sto",
     "isomp_sweeps",
     "iterate_iso_par",
     "iterate_iso_ser",
     "iterate_smm_par",
     "iterate_smm_ser",
+    "iterate_sto_par",
+    "iterate_sto_ser",
     "spherical_sweeps",
+    "stochastic_sweeps",
 ]
 
 #: Smallest spin chain whose sweeps are cut into chunks over numba threads.
@@ -90,10 +95,16 @@ def _b(X, N, c, im, ip):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)
 def _iso_one(X, W, G, N, i, im, ip, c, half, quarter):  # type: ignore[no-untyped-def]
+    b0, b1, b2 = _b(X, N, c, im, ip)
+    return _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter)
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter):  # type: ignore[no-untyped-def]
+    """IsoMP's stage map at spin ``i`` with its ``B_i = (b0, b1, b2)``; the squared change."""
     n, k = _U(N), _U(i)  # unsigned: no negative-index wraparound, the loops vectorize
     n2 = n + n
     x0, x1, x2 = X[k], X[n + k], X[n2 + k]
-    b0, b1, b2 = _b(X, N, c, im, ip)
     d = -(b0 * x0 + b1 * x1 + b2 * x2)
     g0 = W[k] + half * (b1 * x2 - b2 * x1) + quarter * (d * b0)
     g1 = W[n + k] + half * (b2 * x0 - b0 * x2) + quarter * (d * b1)
@@ -267,6 +278,21 @@ def _final(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
     return acc
 
 
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _final_at(Y, W, Wn, N, i, b0, b1, b2, h):  # type: ignore[no-untyped-def]
+    """``Wn_i = W_i + h B_i x Y_i`` with ``B_i = (b0, b1, b2)``; the sum of its sizes."""
+    n, k = _U(N), _U(i)
+    n2 = n + n
+    y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
+    v0 = W[k] + h * (b1 * y2 - b2 * y1)
+    v1 = W[n + k] + h * (b2 * y0 - b0 * y2)
+    v2 = W[n2 + k] + h * (b0 * y1 - b1 * y0)
+    Wn[k] = v0
+    Wn[n + k] = v1
+    Wn[n2 + k] = v2
+    return abs(v0) + abs(v1) + abs(v2)
+
+
 @numba.njit(cache=True)
 def finish_iso(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(X) x X`` from the accepted ``X`` (the bracket of its last evaluation)."""
@@ -289,6 +315,136 @@ def spherical_sweeps(layout: Layout) -> tuple[Any, Any]:
     """The spherical midpoint's fused specialization on the chain."""
     par = layout.record.nch > 1
     return (iterate_smm_par if par else iterate_smm_ser), finish_smm
+
+
+# ---- the stochastic midpoint's fused sweeps ------------------------------------------------------
+# The noise of a step enters ``B_i`` as ``(1/h) (sum_j sd_j F_j + sigma_i dbeta_i)``
+# (:mod:`isoflow._compiled.stages.stochastic_isomp`: ``mp = (fields, site_pos, site_amp)``, the
+# fields in this layout, the site noise of spin ``i`` at ``sd[0, m + 3 i + a]``), read in the
+# same sweep: 48 more bytes a spin than IsoMP's, no more passes.
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _site_noise_at(amp, row, i, inv):  # type: ignore[no-untyped-def]
+    """Site noise only: ``(sigma_i / h) dbeta_i`` (``amp[3 i] = sigma_i``, ``dbeta_i`` at
+    ``row[3 i .. 3 i + 2]``)."""
+    r = _U(3) * _U(i)
+    s = amp[r] * inv
+    return s * row[r], s * row[r + _U(1)], s * row[r + _U(2)]
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _noise_at(fields, amp, row, N, i, inv):  # type: ignore[no-untyped-def]
+    """The noise term of ``B_i``, ``(1/h) (sum_j row_j F_j + sigma_i dbeta_i)``."""
+    m = fields.shape[0]
+    n, k = _U(N), _U(i)
+    n0 = n1 = n2 = 0.0
+    for j in range(m):
+        c = row[j]
+        n0 += c * fields[j, k]
+        n1 += c * fields[j, n + k]
+        n2 += c * fields[j, n + n + k]
+    if amp.shape[0] > 0:
+        r = _U(3) * k
+        q = _U(m) + r
+        s = amp[r]
+        n0 += s * row[q]
+        n1 += s * row[q + _U(1)]
+        n2 += s * row[q + _U(2)]
+    return inv * n0, inv * n1, inv * n2
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _sto_one(X, W, G, N, i, im, ip, c, half, quarter, fields, amp, row, inv):  # type: ignore[no-untyped-def]
+    b0, b1, b2 = _b(X, N, c, im, ip)
+    n0, n1, n2 = _noise_at(fields, amp, row, N, i, inv)
+    return _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi):  # type: ignore[no-untyped-def]
+    """The stochastic sweep over the interior spins ``lo <= i < hi``; site noise alone (the
+    thermal case) in a loop of its own, which vectorizes."""
+    acc = 0.0
+    if fields.shape[0] == 0 and amp.shape[0] > 0:
+        for i in range(lo, hi):
+            b0, b1, b2 = _b(X, N, c, i - 1, i + 1)
+            n0, n1, n2 = _site_noise_at(amp, row, i, inv)
+            acc += _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
+        return acc
+    for i in range(lo, hi):
+        acc += _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter, fields, amp, row, inv)
+    return acc
+
+
+@numba.njit(cache=True)
+def iterate_sto_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """One stochastic-midpoint sweep over the chain (IsoMP's with the step's noise)."""
+    N = lay.N
+    c = lay.c
+    half = 0.5 * hp
+    quarter = 0.25 * hp * hp
+    inv = 1.0 / hp
+    fields, _, amp = mp
+    row = sd[0]
+    acc = _sto_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter, fields, amp, row, inv)
+    if N > 1:
+        acc += _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, 1, N - 1)
+        acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)
+    rr[0] = acc
+
+
+@numba.njit(cache=True, parallel=True)
+def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """:func:`iterate_sto_ser` with the chain cut into ``lay.nch`` chunks over numba threads."""
+    N = lay.N
+    c = lay.c
+    nch = lay.nch
+    half = 0.5 * hp
+    quarter = 0.25 * hp * hp
+    inv = 1.0 / hp
+    fields, _, amp = mp
+    row = sd[0]
+    size = (N + nch - 1) // nch
+    part = np.zeros(nch)
+    for ch in numba.prange(nch):
+        lo = max(ch * size, 1)
+        hi = min((ch + 1) * size, N - 1)
+        if lo < hi:
+            part[ch] = _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi)
+    acc = part.sum()
+    acc += _sto_one(X, W, G, N, 0, N - 1, 1, c, half, quarter, fields, amp, row, inv)
+    acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)
+    rr[0] = acc
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def finish_sto(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B~(X) x X`` from the accepted ``X``, the step's noise in ``B~`` (not
+    compensated: ``E`` is empty)."""
+    N = lay.N
+    c = lay.c
+    inv = 1.0 / hp
+    fields, _, amp = mp
+    row = sd[0]
+    site_only = fields.shape[0] == 0 and amp.shape[0] > 0
+    acc = 0.0
+    for i in range(N):
+        im = i - 1 if i > 0 else N - 1
+        ip = i + 1 if i < N - 1 else 0
+        b0, b1, b2 = _b(X, N, c, im, ip)
+        if site_only:
+            n0, n1, n2 = _site_noise_at(amp, row, i, inv)
+        else:
+            n0, n1, n2 = _noise_at(fields, amp, row, N, i, inv)
+        acc += _final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
+    fin[0] = math.isfinite(acc)
+
+
+def stochastic_sweeps(layout: Layout) -> tuple[Any, Any]:
+    """The stochastic midpoint's fused specialization on the chain."""
+    par = layout.record.nch > 1
+    return (iterate_sto_par if par else iterate_sto_ser), finish_sto
 
 
 # ---- the generic blocks on the (3, N) layout (component a of spin i at a * N + i) ---------------

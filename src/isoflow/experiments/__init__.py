@@ -35,6 +35,7 @@ from .rigid_body import rigid_body as rigid_body
 from .spin_chain_cost import spin_chain_cost as spin_chain_cost
 from .spin_chain_energy import spin_chain_energy as spin_chain_energy
 from .spin_chain_error import spin_chain_error as spin_chain_error
+from .stochastic import stochastic as stochastic
 from .vortices_invariants import vortices_invariants as vortices_invariants
 from .vortices_trajectories import vortices_trajectories as vortices_trajectories
 from .work_precision import work_precision as work_precision
@@ -53,6 +54,7 @@ __all__ = [
     "spin_chain_cost",
     "spin_chain_energy",
     "spin_chain_error",
+    "stochastic",
     "vortices_invariants",
     "vortices_trajectories",
     "work_precision",

@@ -8,6 +8,8 @@ from .explicit_rk import RK4 as RK4
 from .isomp import IsoMP as IsoMP
 from .isosyrk import IsoSyRK as IsoSyRK
 from .spherical_midpoint import SphericalMidpoint as SphericalMidpoint
+from .stochastic_heun import StochasticHeun as StochasticHeun
+from .stochastic_isomp import StochasticIsoMP as StochasticIsoMP
 from .strang import Strang as Strang
 
 __all__ = [
@@ -19,5 +21,7 @@ __all__ = [
     "Method",
     "SphericalMidpoint",
     "StepResult",
+    "StochasticHeun",
+    "StochasticIsoMP",
     "Strang",
 ]

@@ -46,6 +46,7 @@ bit. The compiled loops do the same in every layout.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -119,22 +120,35 @@ class IsoMP(Method):
         if not isinstance(self.compensated, (bool, np.bool_)):
             raise ParameterError(f"compensated must be True or False, got {self.compensated!r}")
 
-    def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:
-        """The fixed-point problem ``X = G(X)`` of one step from ``W``."""
+    def stage_problem(
+        self, problem: IsospectralProblem, W: Array, h: float,
+        extra: Callable[[Array, Array | None], Array] | None = None,
+    ) -> FixedPointProblem:  # fmt: skip
+        """The fixed-point problem ``X = G(X)`` of one step from ``W``.
+
+        ``extra(X, mask)`` is added to ``B(X)`` (the noise of :class:`~isoflow.StochasticIsoMP`;
+        ``mask`` selects the members still iterating, ``None`` all); Newton's exact Jacobian
+        is then used only if ``extra`` does not depend on ``X``, as the caller says by giving
+        the problem's ``B_jvp`` or not.
+        """
         alg = problem.algebra
         stage_alg = alg.stage_algebra
         half, quarter = 0.5 * h, 0.25 * h * h
 
+        def field_at(X: Array, mask: Array | None) -> Array:
+            B = problem.evaluate_B(X)
+            return B if extra is None else B + extra(X, mask)
+
         def G(X: Array, mask: Array | None) -> tuple[Array, Array]:
             Wm = W if mask is None else W[mask]
-            C, T = alg.bracket_and_triple(problem.evaluate_B(X), X)
+            C, T = alg.bracket_and_triple(field_at(X, mask), X)
             return stage_alg.project(Wm + half * C + quarter * T), C
 
         jvp = None
         if problem.B_jvp is not None:
 
             def jvp(X: Array, dX: Array, mask: Array | None) -> Array:
-                B = problem.evaluate_B(X)
+                B = field_at(X, mask)
                 dB = problem.evaluate_B_jvp(X, dX)
                 # d(BXB) = dB X B + B X dB + B dX B; the first two by polarization of the
                 # quadratic map B -> B X B, with dB rescaled to the size of B for accuracy.

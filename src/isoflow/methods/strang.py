@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import ParameterError
-from ..noise import gaussian_increments
+from ..noise import standard_normals
 from ..problems import IsospectralProblem
 from ..splitting import FORCING_STREAM, HalfStep, data_widths, half_step, split_terms
 from ._base import Method, StepDataRequest, StepResult
@@ -133,8 +133,8 @@ class Strang(Method):
             col = 0
             for f, modes, _ in sto:
                 r = modes.size
-                xi = gaussian_increments(
-                    int(f.seed), members, request.k0, n, 2 * r, 1.0, stream=FORCING_STREAM
+                xi = standard_normals(
+                    int(f.seed), members, request.k0, n, 2 * r, stream=FORCING_STREAM
                 )
                 out[:, :, rd + col : rd + col + r] = xi[:, :, :r]
                 out[:, :, 2 * rd + rs + col : 2 * rd + rs + col + r] = xi[:, :, r:]

@@ -28,11 +28,13 @@ from ..sphere import (
     solve_poisson,
     vorticity_from_function,
 )
+from ..sphere._basis import basis_matrix
 from ..sphere._operators import check_N
 from ._checks import require_memory
 from ._forced import budget_invariants, check_double_bracket, sphere_split
+from ._noise import transport_noise
 
-__all__ = ["coriolis_matrix", "euler_sphere", "initial_vorticity"]
+__all__ = ["coriolis_matrix", "euler_sphere", "initial_vorticity", "large_scale_noise"]
 
 Array = NDArray[Any]
 
@@ -98,6 +100,16 @@ def initial_vorticity(
     return from_coefficients(initial, N), "coefficients", {}
 
 
+def large_scale_noise(N: int, degrees: tuple[int, ...] = (1, 2)) -> Array:
+    r"""Transport noise by the stream functions :math:`Y_{lm}`, ``l`` in ``degrees``, of unit
+    amplitude: the fields :math:`\hbar^{-1}\, i T_{lm}` (real harmonics), ``(m, N, N)``."""
+    h = hbar(N)
+    fields = [
+        1j * basis_matrix(N, d, m) / h for d in degrees if d <= N - 1 for m in range(-d, d + 1)
+    ]
+    return np.stack(fields)
+
+
 def euler_sphere(
     N: int = 128,
     omega: float = 0.0,
@@ -117,6 +129,8 @@ def euler_sphere(
     energy_rate: float | None = None,
     forcing_seed: int | None = None,
     double_bracket: float = 0.0,
+    noise: float | ArrayLike | None = None,
+    noise_seed: int | None = None,
 ) -> tuple[IsospectralProblem, Array]:
     r"""Zeitlin's model of the Euler equations on the sphere, and its initial state.
 
@@ -186,6 +200,13 @@ def euler_sphere(
     With dissipation or forcing the problem has a linear part and forcing terms, and runs with
     the split method :class:`~isoflow.Strang` (``iso.Strang()``); its diagnostics then include
     the energy and enstrophy budgets and spectra (:mod:`isoflow.models._forced`).
+    noise : float or array_like, optional
+        Stratonovich transport noise on the large scales: a number :math:`\sigma` gives the
+        eight fields of the stream functions :math:`\sigma Y_{lm}`, ``l = 1, 2``
+        (:func:`large_scale_noise`); an array ``(m, N, N)`` in ``u(N)`` gives the fields.
+        Integrate with :class:`~isoflow.StochasticIsoMP`.
+    noise_seed : int, optional
+        Seed of the noise's increments (required with ``noise``).
 
     Returns
     -------
@@ -340,9 +361,13 @@ def euler_sphere(
     parameters.update(split.parameters)
     if alpha:
         parameters["double_bracket"] = alpha
+    transport = transport_noise("euler_sphere", noise, noise_seed, lambda: large_scale_noise(N))
+    if transport is not None:
+        parameters["noise"] = transport.parameters()
     problem = IsospectralProblem(
         algebra=alg,
         kernel=kernel,
+        noise=transport,
         hamiltonian=hamiltonian,
         invariants=invariants,
         name=f"Euler equations on the sphere, su({N})" + (f", Omega = {Om:g}" if Om else ""),

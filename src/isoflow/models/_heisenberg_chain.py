@@ -7,14 +7,17 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
+from .._kernel_fields import neighbour_sum
 from .._seeds import generator
 from ..algebras.spin import SpinVectors, dot
-from ..kernels import SpinNeighbourSum
+from ..kernels import CompiledB, Kernel, SpinNeighbourSum
 from ..problems import IsospectralProblem
+from ._llg import gilbert, thermal_noise
 
 __all__ = ["heisenberg_chain", "paper_spin_curve"]
 
@@ -48,6 +51,9 @@ def heisenberg_chain(
     initial: Literal["curve", "random"] = "curve",
     seed: int | np.random.Generator | None = None,
     w0: ArrayLike | None = None,
+    temperature: float = 0.0,
+    damping: float = 0.0,
+    noise_seed: int | None = None,
 ) -> tuple[IsospectralProblem, Array]:
     r"""The periodic Heisenberg spin chain and its initial state.
 
@@ -89,6 +95,13 @@ def heisenberg_chain(
         Seed for ``initial="random"``.
     w0 : array_like, optional
         Explicit initial spins, shape ``(*batch, N, 3)``, any lengths (overrides ``initial``).
+    temperature, damping : float
+        Stochastic Landau–Lifshitz–Gilbert dynamics at temperature ``T >= 0`` with Gilbert
+        damping :math:`\lambda \ge 0` (as :func:`~isoflow.models.spin_lattice`): ``B`` gains
+        :math:`\lambda w_i \times B_i` and every spin the thermal site noise
+        :math:`\sqrt{2\lambda T}`; integrate with :class:`~isoflow.StochasticIsoMP`.
+    noise_seed : int, optional
+        Seed of the thermal noise (required when ``temperature > 0``).
 
     Returns
     -------
@@ -142,14 +155,28 @@ def heisenberg_chain(
     def total_spin(W: Array) -> Array:
         return np.sum(W, axis=-2)
 
+    T, lam, noise = thermal_noise("heisenberg_chain", temperature, damping, noise_seed)
+    kernel: Kernel = SpinNeighbourSum(-1.0)  # the same B, for the compiled fast paths
+    parameters: dict[str, Any] = {"N": N, "initial": source, "periodic": True}
+    if lam > 0 or noise is not None:
+        kernel = CompiledB(chain_llg_field, (lam,), name="heisenberg_chain_llg")
+        parameters |= {"temperature": T, "damping": lam, "noise_seed": getattr(noise, "seed", None)}
     problem = IsospectralProblem(
-        B=B,
+        B=None if lam > 0 else B,  # type: ignore[arg-type]
         algebra=alg,
-        kernel=SpinNeighbourSum(-1.0),  # the same B, for the compiled fast paths
+        kernel=kernel,
+        noise=noise,
         hamiltonian=hamiltonian,
-        B_jvp=B_jvp,
+        B_jvp=None if lam > 0 else B_jvp,
         invariants={"momentum": total_spin},
         name=f"Heisenberg spin chain (N = {N})",
-        parameters={"N": N, "initial": source, "periodic": True},
+        parameters=parameters,
     )
     return problem, w_init
+
+
+@numba.njit(cache=True)
+def chain_llg_field(W, out, lam):  # type: ignore[no-untyped-def]
+    r"""``B_i = H_i + lam w_i x H_i``, :math:`H_i = -(w_{i-1} + w_{i+1})` (periodic)."""
+    neighbour_sum(W, out, -1.0)
+    gilbert(W, out, lam)

@@ -30,8 +30,9 @@ from ..algebras import so
 from ..kernels import ElementwiseLinear
 from ..problems import IsospectralProblem
 from ._checks import check_n, real_parameter, require_memory
+from ._noise import transport_noise
 
-__all__ = ["ParameterError", "paper_inertia_d", "rigid_body"]
+__all__ = ["ParameterError", "paper_inertia_d", "rigid_body", "so_basis"]
 
 #: Peak memory of building the model, in states (tracemalloc, n = 1000 and 2000): a size
 #: that does not fit in the available memory is refused before anything is allocated.
@@ -49,6 +50,17 @@ def paper_inertia_d(n: int) -> Array:
     n = check_n(n, 1, "paper_inertia_d")
     i = np.arange(1, n + 1)
     return 1.0 / np.minimum(i, n + 1 - i)
+
+
+def so_basis(n: int) -> Array:
+    r"""The orthonormal basis :math:`(E_{ij} - E_{ji})/\sqrt 2`, ``i < j``, of
+    :math:`\mathfrak{so}(n)` (Frobenius), shape ``(n(n-1)/2, n, n)``."""
+    i, j = np.triu_indices(n, 1)
+    E = np.zeros((i.size, n, n))
+    r = np.arange(i.size)
+    E[r, i, j] = 1.0 / np.sqrt(2.0)
+    E[r, j, i] = -1.0 / np.sqrt(2.0)
+    return E
 
 
 def _plane_moments_from_principal(moments: Array) -> Array:
@@ -70,6 +82,8 @@ def rigid_body(
     inertia: ArrayLike | None = None,
     d: ArrayLike | None = None,
     W0: ArrayLike | None = None,
+    noise: float | ArrayLike | None = None,
+    noise_seed: int | None = None,
 ) -> tuple[IsospectralProblem, Array]:
     r"""The generalized rigid body on :math:`\mathfrak{so}(n)` and its initial state.
 
@@ -124,6 +138,15 @@ def rigid_body(
     W0 : array_like, optional
         Initial state(s), shape ``(*batch, n, n)``, skew-symmetric. Default: the paper's
         :math:`(W_0)_{ij} = 1/10` for :math:`i < j`, :math:`W_0^T = -W_0`.
+    noise : float or array_like, optional
+        Stratonovich transport noise :math:`\sum_i [\Xi_i, W] \circ d\beta_i` (the stochastic
+        rigid body, :class:`~isoflow.noise.TransportNoise`; integrate with
+        :class:`~isoflow.StochasticIsoMP`): a number :math:`\sigma` gives one field per
+        orthonormal basis element of :math:`\mathfrak{so}(n)`,
+        :math:`\Xi_{(ij)} = \sigma (E_{ij} - E_{ji})/\sqrt2` (for ``n = 3``: random torques
+        about the three body axes); an array ``(m, n, n)`` of skew matrices gives the fields.
+    noise_seed : int, optional
+        Seed of the noise's increments (required with ``noise``; see :mod:`isoflow.noise`).
 
     Returns
     -------
@@ -232,9 +255,13 @@ def rigid_body(
     parameters: dict[str, Any] = {"n": n, "inertia": plane, "inverse_inertia": c}
     if d_used is not None:
         parameters["d"] = d_used
+    transport = transport_noise("rigid_body", noise, noise_seed, lambda: so_basis(n))
+    if transport is not None:
+        parameters["noise"] = transport.parameters()
     problem = IsospectralProblem(
         B=B,
         algebra=alg,
+        noise=transport,
         kernel=ElementwiseLinear(-c),  # the same B, for the compiled fast path
         hamiltonian=hamiltonian,
         B_jvp=B_jvp,

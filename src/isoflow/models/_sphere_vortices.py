@@ -13,6 +13,7 @@ from ..algebras.spin import SpinVectors
 from ..kernels import PairwiseVortex
 from ..problems import IsospectralProblem
 from ._checks import check_separated, check_vortex_input
+from ._noise import transport_noise
 
 __all__ = ["sphere_vortices"]
 
@@ -29,6 +30,8 @@ def sphere_vortices(
     circulations: ArrayLike | None = None,
     *,
     tol: float = 1e-8,
+    noise: float | ArrayLike | None = None,
+    noise_seed: int | None = None,
 ) -> tuple[IsospectralProblem, Array]:
     r"""Point vortices on the unit sphere and their initial state.
 
@@ -72,6 +75,14 @@ def sphere_vortices(
         Vortex strengths, finite and nonzero.
     tol : float
         Accepted :math:`||x_i|^2 - 1|`.
+    noise : float or array_like, optional
+        Stratonovich transport noise (:class:`~isoflow.noise.TransportNoise`): a number
+        :math:`\sigma` gives the three noise Hamiltonians :math:`\sigma \sum_j \Gamma_j
+        e_a\cdot x_j` (fields :math:`\sigma e_a` on every vortex: the configuration turned
+        about random axes, its relative geometry and ``H`` kept); an array ``(m, N, 3)``
+        gives the fields. Integrate with :class:`~isoflow.StochasticIsoMP`.
+    noise_seed : int, optional
+        Seed of the noise's increments (required with ``noise``).
 
     Returns
     -------
@@ -149,14 +160,21 @@ def sphere_vortices(
     def momentum(W: Array) -> Array:
         return np.einsum("i,...ik->...k", G, W)
 
+    transport = transport_noise(
+        "sphere_vortices", noise, noise_seed, lambda: np.repeat(np.eye(3)[:, None, :], N, axis=1)
+    )
+    parameters: dict[str, Any] = {"circulations": G, "positions": x_init.copy()}
+    if transport is not None:
+        parameters["noise"] = transport.parameters()
     problem = IsospectralProblem(
         B=B,
         algebra=SpinVectors(N),
+        noise=transport,
         hamiltonian=hamiltonian,
         B_jvp=B_jvp,
         invariants={"momentum": momentum},
         name=f"point vortices on the sphere (N = {N})",
         kernel=PairwiseVortex(G, "sphere"),  # the same B, for the compiled fast paths
-        parameters={"circulations": G, "positions": x_init.copy()},
+        parameters=parameters,
     )
     return problem, x_init

@@ -17,8 +17,9 @@ from .._seeds import generator
 from ..kernels import CompiledB
 from ..problems import IsospectralProblem
 from ._checks import real_parameter
+from ._llg import gilbert, thermal_noise
 
-__all__ = ["spin_lattice", "spin_lattice_field"]
+__all__ = ["spin_lattice", "spin_lattice_field", "spin_lattice_llg_field"]
 
 Array = NDArray[Any]
 
@@ -42,6 +43,14 @@ def spin_lattice_field(W, out, L1, L2, J, Jz, field):  # type: ignore[no-untyped
             out[i, 2] = field[2] - Jz * sz
 
 
+@numba.njit(cache=True)
+def spin_lattice_llg_field(W, out, L1, L2, J, Jz, field, lam):  # type: ignore[no-untyped-def]
+    r"""``B_i = H_i + lam S_i x H_i`` with :math:`H_i` of :func:`spin_lattice_field` (Gilbert
+    damping, :mod:`isoflow.models._llg`)."""
+    spin_lattice_field(W, out, L1, L2, J, Jz, field)
+    gilbert(W, out, lam)
+
+
 def _neighbour_sum(W: Array, L1: int, L2: int) -> Array:
     """Sum of the four neighbours of every site, ``(*batch, N, 3)`` (NumPy, for ``H``)."""
     G = W.reshape(*W.shape[:-2], L1, L2, 3)
@@ -61,6 +70,9 @@ def spin_lattice(
     initial: str = "random",
     seed: int | None = 0,
     w0: ArrayLike | None = None,
+    temperature: float = 0.0,
+    damping: float = 0.0,
+    noise_seed: int | None = None,
 ) -> tuple[IsospectralProblem, Array]:
     r"""Classical Heisenberg/XXZ spins with a Zeeman field on a periodic square lattice.
 
@@ -88,6 +100,16 @@ def spin_lattice(
         Seed of the initial data.
     w0 : array_like, optional
         Explicit initial spins ``(*batch, N, 3)`` (overrides ``initial``).
+    temperature, damping : float
+        Stochastic Landau–Lifshitz–Gilbert dynamics at temperature ``T >= 0`` (``k_B = 1``)
+        with Gilbert damping :math:`\lambda \ge 0`,
+        :math:`dS_i = -S_i \times (H_i\,dt + \sqrt{2\lambda T} \circ d\beta_i)
+        - \lambda S_i \times (S_i \times H_i)\,dt`, :math:`H_i = -\nabla_i H`
+        (:mod:`isoflow.models._llg`): the damping enters ``B``, the thermal field is site
+        noise (integrate with :class:`~isoflow.StochasticIsoMP`). ``T > 0`` needs
+        ``damping > 0``.
+    noise_seed : int, optional
+        Seed of the thermal noise (required when ``temperature > 0``).
 
     Returns
     -------
@@ -178,10 +200,19 @@ def spin_lattice(
     def total_spin(W: Array) -> Array:
         return np.sum(W, axis=-2)
 
-    kernel = CompiledB(spin_lattice_field, (L1, L2, J, J * (1.0 + delta), h), name="spin_lattice")
+    T, lam, noise = thermal_noise("spin_lattice", temperature, damping, noise_seed)
+    if lam > 0:
+        kernel = CompiledB(
+            spin_lattice_llg_field, (L1, L2, J, J * (1.0 + delta), h, lam), name="spin_lattice_llg"
+        )
+    else:
+        kernel = CompiledB(
+            spin_lattice_field, (L1, L2, J, J * (1.0 + delta), h), name="spin_lattice"
+        )
     problem = IsospectralProblem(
         algebra=alg,
         kernel=kernel,
+        noise=noise,
         hamiltonian=hamiltonian,
         invariants={"total_spin": total_spin},
         name=f"spin lattice {L1}x{L2} (J = {J:g}, anisotropy = {delta:g})",
@@ -191,6 +222,9 @@ def spin_lattice(
             "anisotropy": delta,
             "field": h.tolist(),
             "initial": source,
+            "temperature": T,
+            "damping": lam,
+            "noise_seed": None if noise is None else noise.seed,
         },
     )
     return problem, w_init

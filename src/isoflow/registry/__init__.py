@@ -19,8 +19,8 @@ Spellings (one per thing, lower case with hyphens):
   ``"package.module:function"`` (a function returning ``(problem, initial_state)``, its keyword
   arguments from ``params``).
 * **methods** (:data:`METHODS`): ``isomp``, ``spherical-midpoint``, ``classical-midpoint``,
-  ``rk4``, ``isosyrk-1`` .. ``isosyrk-3`` and the compositions ``<base>-<scheme>`` (e.g.
-  ``isomp-suzuki-4``, ``spherical-midpoint-kahan-li-8``).
+  ``stochastic-isomp``, ``stochastic-heun``, ``rk4``, ``isosyrk-1`` .. ``isosyrk-3`` and the
+  compositions ``<base>-<scheme>`` (e.g. ``isomp-suzuki-4``, ``spherical-midpoint-kahan-li-8``).
 * **solvers** (:data:`SOLVERS`): ``fixed-point`` (with ``anderson = m`` for Anderson mixing of
   the last ``m`` iterates, ``m`` at most :data:`ANDERSON_MAX`), ``newton``, ``newton-krylov``.
   Explicit methods (``rk4``) take none.

@@ -215,6 +215,19 @@ def _sphere_data_params(what: str) -> dict[str, Param]:
     }
 
 
+def _noise_seed() -> Param:
+    return Param(int, None, "seed of the noise's increments (required with noise)", low=0)
+
+
+def _thermal() -> dict[str, Param]:
+    """The stochastic Landau-Lifshitz-Gilbert parameters of the spin models."""
+    return {
+        "temperature": Param(float, 0.0, "temperature k_B T (needs damping > 0)", low=0.0),
+        "damping": Param(float, 0.0, "Gilbert damping lambda", low=0.0),
+        "noise_seed": _noise_seed(),
+    }
+
+
 #: Largest matrix size ``n`` of a dense model from the command line (a state of 32 MiB, real).
 DENSE_MAX_N = 2048
 #: Largest ``N`` of MHD on the sphere from the command line: two complex fields (32 MiB) and six
@@ -228,7 +241,13 @@ MODELS: dict[str, ModelSpec] = {
         ModelSpec(
             "rigid-body",
             "isoflow.models:rigid_body",
-            {"n": _size("matrix size of so(n)", 10, 2, DENSE_MAX_N)},
+            {
+                "n": _size("matrix size of so(n)", 10, 2, DENSE_MAX_N),
+                "noise": Param(
+                    float, None, "transport noise amplitude (one field per basis element)", low=0.0
+                ),
+                "noise_seed": _noise_seed(),
+            },
             "generalized rigid body on so(n), the paper's inertia and W0 (Sec. 3.1)",
             builtin=True,
         ),
@@ -264,6 +283,7 @@ MODELS: dict[str, ModelSpec] = {
                     str, "curve", "'curve' (the paper's) or 'random'", choices=("curve", "random")
                 ),
                 "seed": _seed("seed for initial = 'random'"),
+                **_thermal(),
             },
             "periodic Heisenberg spin chain on (R^3, x)^N (Sec. 3.3)",
             builtin=True,
@@ -288,6 +308,7 @@ MODELS: dict[str, ModelSpec] = {
                     str, "random", "'random' or 'ferro' (a spin wave)", choices=("random", "ferro")
                 ),
                 "seed": _seed(),
+                **_thermal(),
             },
             "classical Heisenberg/XXZ spins with a Zeeman field on a periodic square lattice",
             builtin=True,
@@ -303,6 +324,13 @@ MODELS: dict[str, ModelSpec] = {
                 "double_bracket": Param(
                     float, None, "selective decay: energy dissipated, Casimirs kept", low=0.0
                 ),
+                "noise": Param(
+                    float,
+                    None,
+                    "transport noise on the stream functions of degrees 1, 2",
+                    low=0.0,
+                ),
+                "noise_seed": _noise_seed(),
             },
             "Zeitlin's quantized Euler equations on the (rotating) sphere, su(N)",
             builtin=True,

@@ -27,6 +27,7 @@ EXPERIMENTS: dict[str, str] = {
         "vortices-invariants",
         "euler-sphere",
         "mhd-sphere",
+        "stochastic",
         "work-precision",
         "forced-turbulence",
         "qg-jets",

@@ -21,6 +21,8 @@ from ..methods import (
     IsoSyRK,
     Method,
     SphericalMidpoint,
+    StochasticHeun,
+    StochasticIsoMP,
     Strang,
 )
 from ..methods.composition import SCHEMES
@@ -111,6 +113,17 @@ _BASES: dict[str, tuple[Callable[..., Method], str]] = {
 METHODS: dict[str, MethodSpec] = {
     **{name: MethodSpec(name, _plain(cls), text) for name, (cls, text) in _BASES.items()},
     "rk4": MethodSpec("rk4", lambda solver: RK4(), "classical RK4 (explicit)", implicit=False),
+    "stochastic-isomp": MethodSpec(
+        "stochastic-isomp",
+        _plain(StochasticIsoMP),
+        "stochastic isospectral midpoint (models with noise or a temperature)",
+    ),
+    "stochastic-heun": MethodSpec(
+        "stochastic-heun",
+        lambda solver: StochasticHeun(),
+        "stochastic Heun (explicit; not isospectral: a baseline for stochastic-isomp)",
+        implicit=False,
+    ),
     **{
         f"isosyrk-{s}": MethodSpec(
             f"isosyrk-{s}",

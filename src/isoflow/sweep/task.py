@@ -9,6 +9,7 @@ afresh.
 
 from __future__ import annotations
 
+import dataclasses
 import fcntl
 import os
 import signal
@@ -37,6 +38,7 @@ __all__ = [
     "sweep_mark",
     "task_layouts",
     "watch_client",
+    "with_member_ids",
 ]
 
 Array = Any
@@ -66,6 +68,17 @@ def build_member(
     return problem, y0
 
 
+def with_member_ids(problem: Any, members: list[Member]) -> Any:
+    """The problem whose noise keys its members by their index in the sweep (not in the task):
+    a task's ensemble then draws the increments one ensemble of the whole sweep draws
+    (:class:`isoflow.noise.TransportNoise`)."""
+    if getattr(problem, "noise", None) is None:
+        return problem
+    return dataclasses.replace(
+        problem, noise=problem.noise.with_members([m.index for m in members])
+    )
+
+
 def _method(spec: SweepSpec) -> Any:
     """The sweep's method with its solver (the registry's, as :func:`~isoflow.registry.build`)."""
     from ..registry import METHODS, make_method, make_solver
@@ -93,7 +106,7 @@ def build_task(spec: SweepSpec, task: Task) -> tuple[Any, Array, Any, dict[str, 
         states.append(y0)
     run = spec.run
     kwargs = {k: run[k] for k in ("t0", "dt", "n_steps", "save_every")}
-    return problem, np.stack(states), _method(spec), kwargs
+    return with_member_ids(problem, list(task.members)), np.stack(states), _method(spec), kwargs
 
 
 def member_run(spec: SweepSpec, i: int, **solve_kwargs: Any) -> Solution:
@@ -102,6 +115,7 @@ def member_run(spec: SweepSpec, i: int, **solve_kwargs: Any) -> Solution:
     A sweep's stored states of the member equal this run's saved states bit for bit.
     """
     problem, y0 = build_member(spec, spec.members[i])
+    problem = with_member_ids(problem, [spec.members[i]])
     run = spec.run
     kwargs = {k: run[k] for k in ("t0", "dt", "n_steps", "save_every")}
     kwargs = kwargs | {"progress": False, "throw": False} | solve_kwargs

@@ -25,14 +25,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ...methods import IsoMP, SphericalMidpoint, Strang
+from ...methods import IsoMP, SphericalMidpoint, StochasticIsoMP, Strang
 from ...methods._base import StepDataRequest
 from ...splitting import data_widths
 from .. import dense_planar, dense_tiles, spin_chain
 from ..dense import DenseBlas
 from ..layout import Layout
 from ..spin_chain import SpinChain
-from . import isomp, spherical_midpoint, split
+from . import isomp, spherical_midpoint, split, stochastic_isomp
 
 __all__ = [
     "CompiledStage",
@@ -81,7 +81,9 @@ def _no_offsets(method: Any) -> int:
     return 0
 
 
-def _no_params(method: Any, problem: Any, steps: tuple[float, ...]) -> tuple[Any, ...]:
+def _no_params(
+    method: Any, problem: Any, layout: Layout, steps: tuple[float, ...]
+) -> tuple[Any, ...]:
     return ()
 
 
@@ -91,6 +93,12 @@ def _always(*args: Any) -> bool:
 
 def _not_compensated(method: Any) -> bool:
     return False
+
+
+def _method_step_data(method: Any, problem: Any, request: StepDataRequest) -> Any:
+    """The step data of a method that reads some (:meth:`isoflow.Method.step_data`): the
+    compiled and the NumPy paths read the same."""
+    return method.step_data(problem, request)
 
 
 @dataclass(frozen=True)
@@ -111,8 +119,9 @@ class CompiledStage:
         solve starts from the state). The method state is then ``(h, D_1, D_2, ...)``, newest
         first, as :class:`isoflow.IsoMP` keeps it.
     params : callable
-        ``(method, problem, steps) -> tuple``: the method's parameters as the stage reads them,
-        for a run whose substeps have the lengths ``steps`` (one, unless composed).
+        ``(method, problem, layout, steps) -> tuple``: the method's parameters as the stage
+        reads them (arrays in the layout's units), for a run whose substeps have the lengths
+        ``steps`` (one, unless composed).
     begin : numba dispatcher or None
         An explicit part before each solve (a split step), or none.
     step_data : callable or None
@@ -142,7 +151,7 @@ class CompiledStage:
     needs: frozenset[str]
     nwork: int
     offsets: Callable[[Any], int] = _no_offsets
-    params: Callable[[Any, Any, tuple[float, ...]], tuple[Any, ...]] = _no_params
+    params: Callable[[Any, Any, Layout, tuple[float, ...]], tuple[Any, ...]] = _no_params
     begin: Any = None
     step_data: Callable[[Any, Any, StepDataRequest], Any] | None = None
     compensated: Callable[[Any], bool] = _not_compensated
@@ -267,7 +276,7 @@ register(
         offsets=lambda method: _isomp_offsets(method.base),
         params=split.params,
         begin=split.begin,
-        step_data=lambda method, problem, request: method.step_data(problem, request),
+        step_data=_method_step_data,
         compensated=lambda method: bool(method.base.compensated),
         applies=_split_applies,
         accepts=lambda layout: layout.lanes == 1 and layout.identity,
@@ -276,6 +285,30 @@ register(
                 _dense_blas_split,
                 _dense_blas_rows,
                 "IsoMP's (benchmarks 3, 10, 12); the split step's cost: benchmark 15",
+            ),
+        },
+    ),
+)
+
+
+register(
+    StochasticIsoMP,
+    CompiledStage(
+        "stochastic IsoMP",
+        stochastic_isomp.iterate,
+        isomp.finish,
+        frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
+        stochastic_isomp.NWORK,
+        params=stochastic_isomp.noise_params,
+        step_data=_method_step_data,
+        applies=lambda method, problem, composed: (
+            not composed and stochastic_isomp.compiled_noise(problem)
+        ),
+        specializations={
+            SpinChain: Specialization(
+                spin_chain.stochastic_sweeps,
+                1,
+                "benchmark 18: IsoMP's fused sweep with the noise read in it",
             ),
         },
     ),

@@ -185,8 +185,9 @@ def finish_planar(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # typ
     _half_step(mp, sd, Wn, h, 1)
 
 
-def params(method: Any, problem: Any, steps: tuple[float, ...]) -> SplitParams:
-    """The stage's parameters for the substep lengths ``steps`` of a run of ``problem``."""
+def params(method: Any, problem: Any, layout: Any, steps: tuple[float, ...]) -> SplitParams:
+    """The stage's parameters for the substep lengths ``steps`` of a run of ``problem`` (on a
+    layout of one member per unit in the state's own order: ``layout`` is not read)."""
     alg = problem.algebra
     taus = tuple(dict.fromkeys(0.5 * float(s) for s in steps))
     lin = problem.linear_part

@@ -1,0 +1,214 @@
+r"""The stochastic isospectral midpoint for Stratonovich transport noise.
+
+For the stochastic Lie–Poisson system (:class:`isoflow.noise.TransportNoise`)
+
+.. math::
+
+    dW = [B(W), W]\,dt + \sum_{i=1}^m [B_i(W), W] \circ d\beta_i(t),
+
+one step ``W_k -> W_{k+1}`` over ``[t_k, t_k + h]`` with the increments
+:math:`\Delta\beta_i = \beta_i(t_k + h) - \beta_i(t_k)` is IsoMP with :math:`h B(X)` replaced by
+
+.. math::
+
+    \tilde B(X) = h B(X) + \sum_i \Delta\beta_i B_i(X), \qquad
+    W_k = (I - \tfrac12 \tilde B)\, X\, (I + \tfrac12 \tilde B), \qquad
+    W_{k+1} = (I + \tfrac12 \tilde B)\, X\, (I - \tfrac12 \tilde B)
+
+(Ephrati, Jansson, Lang, Luesink, arXiv:2408.16701): the fixed point of
+:math:`G(X) = W_k + \tfrac12 [\tilde B, X] + \tfrac14 \tilde B X \tilde B` and
+:math:`W_{k+1} = W_k + [\tilde B, X]`, a Cayley conjugation of :math:`W_k`, so every Casimir is
+kept for every path (almost surely). The paper proves root-mean-square (strong) order 1/2 and
+weak order 1; with commuting noise fields the strong order is 1. The increments are the
+reproducible ones of :mod:`isoflow.noise` (truncated, by default, as the paper's analysis
+assumes: see :func:`isoflow.noise.truncation_level`). The derivation is in
+``docs/theory/stochastic.rst``.
+
+Written as IsoMP on the field :math:`B(X) + \tfrac1h \sum_i \Delta\beta_i B_i(X)`, so the compiled
+stage is IsoMP's with one more term (:mod:`isoflow._compiled.stages.stochastic_isomp`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._errors import ParameterError
+from ..algebras import Algebra
+from ..noise import TRANSPORT_STREAM, TransportNoise, brownian_increments, check_truncation
+from ..nonlinear import FixedPoint, NonlinearSolver
+from ..problems import IsospectralProblem
+from ._base import Method, StepDataRequest, StepResult, check_implicit_options
+from .isomp import IsoMP
+
+__all__ = ["StochasticIsoMP"]
+
+Array = NDArray[Any]
+
+
+@dataclass(frozen=True)
+class StochasticIsoMP(Method):
+    r"""The stochastic isospectral midpoint (strong order 1/2, weak order 1).
+
+    Parameters
+    ----------
+    solver : FixedPoint or Newton
+        Nonlinear solver for the stage (as :class:`~isoflow.IsoMP`). Each solve starts from the
+        state: the stage offsets of a noisy path are not smooth in time, so IsoMP's
+        extrapolated guess does not apply.
+    truncation : float or None
+        ``k`` of the truncated increments :math:`\sqrt h\,\zeta`, :math:`|\zeta| \le A_h =
+        \sqrt{2k|\ln h|}` (default 2: strong order 1/2 and weak order 1 kept); ``None`` draws
+        Gaussian increments (a step whose solve then diverges fails its member).
+    substeps : int
+        A step's increments are the sums of those of ``substeps`` steps of size ``h /
+        substeps`` (truncated at that size): a run with step ``h`` then lies on the Brownian
+        path of the run with step ``h / substeps`` and the same seed, which is what a
+        strong-convergence study compares (default 1: the step's own increments).
+
+    Notes
+    -----
+    The problem's :class:`~isoflow.noise.TransportNoise` gives the fields and the seed; a
+    problem without noise is integrated as IsoMP from the state, bit for bit. Step ``k`` of
+    member ``j`` uses the increments keyed by ``(seed, noise.member_ids(M)[j], k)``.
+
+    Examples
+    --------
+    >>> import isoflow as iso
+    >>> prob, W0 = iso.models.rigid_body(3, noise=0.2, noise_seed=1)
+    >>> sol = iso.solve(prob, iso.StochasticIsoMP(), W0, dt=0.01, n_steps=100)
+    >>> bool(sol.diagnostics.casimir_drift < 1e-13)
+    True
+    """
+
+    solver: NonlinearSolver = field(default_factory=FixedPoint)
+    truncation: float | None = 2.0
+    substeps: int = 1
+
+    order: ClassVar[int] = 1
+    implicit: ClassVar[bool] = True
+    symmetric: ClassVar[bool] = False
+    name: ClassVar[str] = "stochastic IsoMP"
+    reads_step_data: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        check_implicit_options(self.solver, "state")
+        object.__setattr__(self, "truncation", check_truncation(self.truncation))
+        check_substeps(self.substeps)
+
+    @property
+    def deterministic(self) -> IsoMP:
+        """IsoMP from the state with this solver (the step on the field with noise)."""
+        return IsoMP(solver=self.solver, initial_guess="state")
+
+    def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
+        """The increments ``(nsteps, members, D)`` of the request (``D`` Brownian motions,
+        :meth:`TransportNoise.dimension <isoflow.noise.TransportNoise.dimension>`)."""
+        return transport_increments(problem, request, self.truncation, self.substeps)
+
+    def step(
+        self, problem: IsospectralProblem, y: Array, h: float, state: Any = None,
+        data: Array | None = None,
+    ) -> StepResult:  # fmt: skip
+        noise = problem.noise
+        base = self.deterministic
+        if noise is None or noise.dimension(problem.algebra) == 0:
+            return base.step(problem, y, h, None)
+        alg = problem.algebra
+        db = step_increments(self, problem, y, h, data)
+        res = base.solver.solve(
+            base.stage_problem(_without_jvp(problem, noise), y, h, _noise_term(noise, alg, db, h)),
+            y,
+        )
+        return StepResult.from_solve(alg.project(y + h * res.aux), res, None)
+
+
+def check_substeps(substeps: Any) -> int:
+    """``substeps`` as an int ``>= 1``, else a one-line :class:`ParameterError`."""
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ParameterError(f"substeps must be an integer >= 1, got {substeps!r}")
+    return int(substeps)
+
+
+def transport_increments(
+    problem: IsospectralProblem, request: StepDataRequest, truncation: float | None,
+    substeps: int = 1,
+) -> Array:  # fmt: skip
+    """The increments ``(nsteps, members, D)`` of the problem's transport noise for
+    ``request``, keyed by the members' ids (:class:`~isoflow.noise.TransportNoise`): the step
+    data of every method for transport noise, so that they step on the same paths. With
+    ``substeps = r``, step ``k``'s increments are the sums of those of the steps ``r (k - 1) +
+    1 .. r k`` of size ``h / r``."""
+    members = np.asarray(request.members, dtype=np.int64).reshape(-1)
+    noise = problem.noise
+    if noise is None:
+        return np.zeros((request.nsteps, members.size, 0))
+    keys = members
+    if noise.members is not None:
+        keys = np.where(members >= 0, noise.members[np.maximum(members, 0)], -1)
+    r = substeps
+    D = noise.dimension(problem.algebra)
+    fine = brownian_increments(
+        noise.seed, keys, request.k0 * r, request.nsteps * r, D, request.h / r,  # type: ignore[arg-type]
+        stream=TRANSPORT_STREAM, truncation=truncation,
+    )  # fmt: skip
+    if r == 1:
+        return fine
+    return fine.reshape(request.nsteps, r, members.size, D).sum(axis=1)
+
+
+def step_increments(
+    method: Method, problem: IsospectralProblem, y: Array, h: float, data: Array | None
+) -> Array:
+    """The step's increments ``(*batch, D)``: ``data`` as the time loop hands it, or, for one
+    step on its own (``iso.step``), those of the first step of the members ``0 .. M - 1``."""
+    batch = problem.algebra.batch_shape(y)
+    if data is None:
+        M = int(np.prod(batch, dtype=np.int64))
+        data = method.step_data(problem, StepDataRequest(0, 1, np.arange(M), h))[0]
+    return np.asarray(data, dtype=np.float64).reshape(*batch, -1)
+
+
+def _noise_term(
+    noise: TransportNoise, alg: Algebra, db: Array, h: float
+) -> Callable[[Array, Array | None], Array]:
+    """``(X, mask) -> (1/h) sum_i dbeta_i B_i(X)`` for the members ``mask`` (constant fields:
+    computed once)."""
+    if callable(noise.fields):
+
+        def term(X: Array, mask: Array | None) -> Array:
+            return noise.increment(X, db if mask is None else db[mask], alg) / h
+
+        return term
+    fixed = noise.increment(np.zeros((*db.shape[:-1], *alg.shape), dtype=alg.dtype), db, alg) / h
+
+    def constant(X: Array, mask: Array | None) -> Array:
+        return fixed if mask is None else fixed[mask]
+
+    return constant
+
+
+def _without_jvp(problem: IsospectralProblem, noise: TransportNoise) -> IsospectralProblem:
+    """The problem, without its ``B_jvp`` when the noise fields depend on the state."""
+    if callable(noise.fields):
+        return dataclasses.replace(problem, B_jvp=None)
+    return problem
+
+
+def refuse_noise(problem: IsospectralProblem, method: Method) -> None:
+    """Raise if a method that reads no increments is given a problem with noise.
+
+    Raises
+    ------
+    ParameterError
+    """
+    if problem.noise is not None and not method.reads_step_data:
+        raise ParameterError(
+            f"the problem has transport noise, which {method.name} would ignore: integrate it "
+            "with iso.StochasticIsoMP() (method 'stochastic-isomp')"
+        )
