@@ -82,7 +82,7 @@ class QGOperator:
     diag : ndarray, shape (N, N)
         The coefficient of :math:`\Psi_{ab}` in :math:`(A\Psi)_{ab}`.
     inv_piv, mult : ndarray, shape (N, N)
-        The factorization (:func:`isoflow.sphere.factor_diagonals`).
+        The factorization (``isoflow.sphere._operators.factor_diagonals``).
     """
 
     def __init__(self, N: int, lamb: float, kappa: float) -> None:

@@ -156,7 +156,7 @@ def helmholtz_solve(W, out, inv_piv, mult, shift):  # type: ignore[no-untyped-de
     r"""``out = A^{-1}(W - \mathrm{diag}(\text{shift}))`` for an operator ``A`` with
     :math:`\Delta_N`'s structure whose every diagonal block is definite (the quasi-geostrophic
     :math:`\Delta_N - \kappa^2 - F\,\tfrac12\{Z^2, \cdot\}`; ``inv_piv``, ``mult`` from
-    :func:`isoflow.sphere.factor_diagonals`). ``O(N^2)``: two sweeps, as
+    ``isoflow.sphere._operators.factor_diagonals``). ``O(N^2)``: two sweeps, as
     :func:`poisson_solve`, without its trace handling (the trace is part of the solution)."""
     _sweeps(W, shift, out, inv_piv, mult)
 
