@@ -111,11 +111,12 @@ def _call_seconds(timer: Any) -> float:
 
 @functools.cache
 def _stage_loop() -> Any:
-    """Compiled loop: ``its`` iterations of the stage from ``X = W``, then the new state."""
+    """Compiled loop: ``its`` iterations of the stage from ``X = W``, then the new state
+    (compensated by ``E`` unless it is empty, as the driver does)."""
     import numba
 
     @numba.njit
-    def loop(iterate, finish, f, fargs, lay, mp, W, X, G, aux, work, Wn, h, its, n):  # type: ignore[no-untyped-def]
+    def loop(iterate, finish, f, fargs, lay, mp, W, X, G, aux, work, E, Wn, h, its, n):  # type: ignore[no-untyped-def]
         sd = np.empty((1, 0))
         rr = np.zeros(1)
         fin = np.ones(1, dtype=np.bool_)
@@ -124,7 +125,7 @@ def _stage_loop() -> Any:
             for _ in range(its):
                 iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr)
                 X, G = G, X
-            finish(f, fargs, lay, mp, sd, W, X, aux, work, h, Wn, fin)
+            finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)
             W[:] = Wn
 
     return loop
@@ -144,8 +145,10 @@ def _stage_only_seconds(runner: Any, its: int, h: float, n: int) -> float:
     W = runner.W[0].copy()
     X, G, aux, Wn = (np.empty_like(W) for _ in range(4))
     work = np.empty((max(impl.nwork, 1), W.shape[0]), dtype=W.dtype)
+    compensated = runner.stage.compensated(runner.method)  # IsoMP's default: compensated
+    E = np.zeros_like(W) if compensated else np.empty(0, dtype=W.dtype)
     args = (impl.iterate, impl.finish, runner.f, runner.fargs, runner.layout.record, runner.mp,
-            W, X, G, aux, work, Wn, h, its)  # fmt: skip
+            W, X, G, aux, work, E, Wn, h, its)  # fmt: skip
     loop(*args, 1)
     best = np.inf
     for _ in range(5):

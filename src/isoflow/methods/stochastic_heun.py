@@ -1,7 +1,8 @@
 r"""Stochastic Heun: the explicit Stratonovich baseline for transport noise (not isospectral).
 
-For :math:`dW = [B(W), W]\,dt + \sum_i [B_i(W), W] \circ d\beta_i` (:class:`isoflow.noise.
-TransportNoise`), one step with the increments :math:`\Delta\beta_i` is the predictor–corrector
+For :math:`dW = [B(W), W]\,dt + \sum_i [B_i(W), W] \circ d\beta_i`
+(:class:`isoflow.noise.TransportNoise`), one step with the increments :math:`\Delta\beta_i` is
+the predictor–corrector
 
 .. math::
 
