@@ -22,6 +22,7 @@ from isoflow._stepping import PythonRunner
 from isoflow.io.codec import pack_state as _pack_state
 from isoflow.io.codec import unpack_state as _unpack_state
 from isoflow.methods.composition import SCHEMES, composition_order, full_coefficients
+from isoflow.methods.isomp import state_parts
 from isoflow.registry import build
 from test_lie_poisson import _defect
 from test_lie_poisson import _problem as lp_problem
@@ -237,9 +238,11 @@ def test_one_warm_start_per_substep_position() -> None:
     for g in method.coefficients:
         k = state[pos]
         sub = state[pos + 1 : pos + 1 + k]
-        assert sub[0] == g * 0.05 and len(sub) == 4  # (g h, D_k, D_{k-1}, D_{k-2})
-        assert all(isinstance(D, np.ndarray) and D.shape == W0.shape for D in sub[1:])
-        seen.append(sub[1])
+        # (g h, D_k, D_{k-1}, D_{k-2}, E, 3): three offsets and the compensation E
+        offsets, E = state_parts(sub, g * 0.05)
+        assert sub[0] == g * 0.05 and len(offsets) == 3 and sub[-1] == 3
+        assert all(isinstance(D, np.ndarray) and D.shape == W0.shape for D in (*offsets, E))
+        seen.append(offsets[0])
         pos += 1 + k
     assert pos == len(state)
     # substeps of the same length at mirrored positions keep distinct histories

@@ -134,6 +134,9 @@ def run_unit(  # type: ignore[no-untyped-def]
     Wn = np.empty(S, dtype=dt)
     work = np.empty((max(nwork, 1), S), dtype=dt)
     Wstart = np.empty(S if P > 1 else 1, dtype=dt)
+    # the compensations at the start of a step: a failed step leaves its lane's as they were
+    Estart = np.empty(comp.shape, dtype=comp.dtype)
+    compensated = comp.shape[1] != 0
     D = data.shape[2]
     sd = np.empty((L, D))
     mm = max(mem, 1)
@@ -173,6 +176,9 @@ def run_unit(  # type: ignore[no-untyped-def]
                     sd[q, j] = data[step, m0 + q, j]
         if P > 1:
             copy(Wstart, W)
+        if compensated:
+            for p in range(P):
+                copy(Estart[p], comp[p])
         for q in range(L):
             its[q] = 0
             ok[q] = alive[q]
@@ -256,6 +262,9 @@ def run_unit(  # type: ignore[no-untyped-def]
                 _record_failure(rec[m0 + q], k, fail_code[q], its[q], fail_res[q])
         if failed_now and P > 1:  # earlier substeps of the step were committed: undo them
             blocks.commit_lanes(lay, W, Wstart, restore)
+        if failed_now and compensated:  # and the compensations the step changed
+            for p in range(P):
+                blocks.commit_lanes(lay, comp[p], Estart[p], restore)
         to_save -= 1
         if to_save == 0 or k == k_final:  # k % every == 0, without a division per step
             blocks.store(lay, out, row, m0, nv, W)
