@@ -29,7 +29,7 @@ from .._failures import B_RAISED, MemberFailures
 from .._save_grid import SaveGrid
 from .._stepping import Runner
 from ..kernels import CompiledB
-from ..methods import Composition, Method
+from ..methods import Composition, Method, Strang
 from ..methods import composition as _composition
 from ..methods.isomp import extrapolation_weights, pack_state, state_parts
 from ..nonlinear import FixedPoint
@@ -88,6 +88,8 @@ def compiled_runner(
     """A :class:`CompiledRunner` for the run, or ``None`` when it has no compiled path."""
     if problem.kernel is None:
         return None
+    if isinstance(method, Strang) and problem.linear_part is None and not problem.forcing:
+        method = method.base  # nothing to split: the base method's own stage, bit for bit
     base: Any = method
     gammas: tuple[float, ...] = (1.0,)
     if isinstance(method, Composition):
