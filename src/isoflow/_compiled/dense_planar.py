@@ -32,13 +32,11 @@ float planes); ``aux`` holds the planes of ``P`` (real, imaginary) for the finis
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 
-from .dense import _TILE, remove_trace, remove_trace_compensated
-from .dense_tiles import _load_t, _store_t
+from .dense import _TILE
+from .dense_tiles import _load_t, _store_t, close_update
 from .flat import two_sum
 
 __all__ = ["NWORK", "finish", "iterate"]
@@ -284,9 +282,4 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ign
                 Wo[i, j] = v
                 Wo[j, i] = s * v.conjugate()
                 acc += abs(v.real) + abs(v.imag)
-    if lay.traceless:
-        if compensated:
-            remove_trace_compensated(Wn, E, n)
-        else:
-            remove_trace(Wn, n)
-    fin[0] = math.isfinite(acc)
+    close_update(lay, Wn, E, acc, fin)

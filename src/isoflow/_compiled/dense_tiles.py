@@ -139,6 +139,18 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[
     rr[0] = _combine(W.reshape((n, n)), Xm, P, Tp, rowoff, G.reshape((n, n)), s, half, quarter)
 
 
+@numba.njit(cache=True, inline="always")
+def close_update(lay, Wn, E, acc, fin):  # type: ignore[no-untyped-def]
+    """The end of a tiled finish: the trace removed on ``su(n)`` (with the compensation ``E``
+    unless it is empty), ``fin[0]`` whether the sum ``acc`` of the entries' sizes is finite."""
+    if lay.traceless:
+        if E.shape[0] != 0:
+            remove_trace_compensated(Wn, E, lay.n)
+        else:
+            remove_trace(Wn, lay.n)
+    fin[0] = math.isfinite(acc)
+
+
 @numba.njit(cache=True, fastmath={"nsz", "contract"})
 def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = Pi_V(W + h (P + sigma(P)))`` with ``P = B X`` in ``aux``, computed on the lower
@@ -206,9 +218,4 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ign
                 Wo[i, j] = v
                 Wo[j, i] = s * v.conjugate()
                 acc += abs(v.real) + abs(v.imag)
-    if lay.traceless:
-        if compensated:
-            remove_trace_compensated(Wn, E, n)
-        else:
-            remove_trace(Wn, n)
-    fin[0] = math.isfinite(acc)
+    close_update(lay, Wn, E, acc, fin)
