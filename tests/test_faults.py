@@ -108,25 +108,33 @@ def test_writes_failing_after_k_bytes_stop_the_run_and_resume(
 def test_a_kill_at_any_write_leaves_a_file_that_resumes(
     tmp_path: Path, ref: io.RunData, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    # The disk just before 12 writes to the published file, drawn uniformly from all of them
+    # by reservoir sampling (seeded): how many writes a run makes depends on its chunk timing,
+    # which draws fixed in advance would have to guess.
     rng = np.random.default_rng(7)
-    copies: list[Path] = []
-    at = {int(k) for k in rng.integers(0, 900, 12)}
-    count = {"n": 0}
+    kept: dict[int, Path] = {}  # reservoir slot -> copy
+    eligible = {"n": 0}
     final = tmp_path / "run.h5"
 
     def hook(sf: safefile.SafeFile, offset: int, data: bytes) -> None:
-        count["n"] += 1
         fd = sf.fileno()
-        if count["n"] in at and final.exists() and os.path.samestat(os.fstat(fd), final.stat()):
-            dst = tmp_path / f"kill{count['n']}.h5"  # the disk just before this write
+        if not (final.exists() and os.path.samestat(os.fstat(fd), final.stat())):
+            return
+        eligible["n"] += 1
+        i = eligible["n"]
+        slot = len(kept) if len(kept) < 12 else int(rng.integers(0, i))
+        if slot < 12:
+            dst = tmp_path / f"kill{i}.h5"
             dst.write_bytes(os.pread(fd, os.fstat(fd).st_size, 0))
-            copies.append(dst)
+            if slot in kept:
+                kept[slot].unlink()
+            kept[slot] = dst
 
     monkeypatch.setattr(safefile, "write_hook", hook)
     _solve(final)
     monkeypatch.setattr(safefile, "write_hook", None)
-    assert count["n"] > max(at) and len(copies) >= 8, (count, len(copies))
-    for path in copies:
+    assert eligible["n"] >= 50 and len(kept) == 12, (eligible, len(kept))
+    for path in sorted(kept.values()):
         _resumes_bit_for_bit(path, ref)
 
 
