@@ -274,6 +274,40 @@ def disk_before_each_write(path: Path) -> Iterator[list[bytes]]:
         safefile.write_hook = None
 
 
+@contextmanager
+def disk_before_sampled_writes(
+    path: Path, k: int, rng: np.random.Generator
+) -> Iterator[dict[str, Any]]:
+    """Keep the bytes of the result file ``path`` before ``k`` of its writes once it is
+    published, drawn uniformly from all of them by reservoir sampling with ``rng``.
+
+    How many writes a run makes depends on its chunk timing; draws fixed in advance would have
+    to guess that number (a draw beyond it is a write that never comes). Yields
+    ``{"writes": n, "copies": [bytes, ...]}`` (``n`` the writes seen, the copies in write order).
+    """
+    from isoflow.io import safefile
+
+    kept: dict[int, tuple[int, bytes]] = {}  # reservoir slot -> (write number, bytes)
+    out: dict[str, Any] = {"writes": 0, "copies": []}
+
+    def hook(sf: Any, offset: int, data: bytes) -> None:
+        fd = sf.fileno()
+        if not (path.exists() and os.path.samestat(os.fstat(fd), path.stat())):
+            return
+        out["writes"] += 1
+        i = out["writes"]
+        slot = len(kept) if len(kept) < k else int(rng.integers(0, i))
+        if slot < k:
+            kept[slot] = (i, os.pread(fd, os.fstat(fd).st_size, 0))
+
+    safefile.write_hook = hook
+    try:
+        yield out
+    finally:
+        safefile.write_hook = None
+        out["copies"] = [b for _, b in sorted(kept.values())]
+
+
 #: A user's model module: ``factory(n, seed)`` of a rigid body on so(n) with a Python ``B``.
 USER_MODEL_SOURCE = '''
 import numpy as np

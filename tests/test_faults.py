@@ -24,6 +24,7 @@ import pytest
 
 import isoflow as iso
 from cli_helpers import isoflow_cmd, one_error_line, run_cli
+from helpers import disk_before_sampled_writes
 from isoflow import io
 from isoflow.io import safefile
 from isoflow.io.layout import header_crc, slot_crc
@@ -105,36 +106,14 @@ def test_writes_failing_after_k_bytes_stop_the_run_and_resume(
 # ---- a kill at random writes -------------------------------------------------------------------
 
 
-def test_a_kill_at_any_write_leaves_a_file_that_resumes(
-    tmp_path: Path, ref: io.RunData, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    # The disk just before 12 writes to the published file, drawn uniformly from all of them
-    # by reservoir sampling (seeded): how many writes a run makes depends on its chunk timing,
-    # which draws fixed in advance would have to guess.
-    rng = np.random.default_rng(7)
-    kept: dict[int, Path] = {}  # reservoir slot -> copy
-    eligible = {"n": 0}
+def test_a_kill_at_any_write_leaves_a_file_that_resumes(tmp_path: Path, ref: io.RunData) -> None:
     final = tmp_path / "run.h5"
-
-    def hook(sf: safefile.SafeFile, offset: int, data: bytes) -> None:
-        fd = sf.fileno()
-        if not (final.exists() and os.path.samestat(os.fstat(fd), final.stat())):
-            return
-        eligible["n"] += 1
-        i = eligible["n"]
-        slot = len(kept) if len(kept) < 12 else int(rng.integers(0, i))
-        if slot < 12:
-            dst = tmp_path / f"kill{i}.h5"
-            dst.write_bytes(os.pread(fd, os.fstat(fd).st_size, 0))
-            if slot in kept:
-                kept[slot].unlink()
-            kept[slot] = dst
-
-    monkeypatch.setattr(safefile, "write_hook", hook)
-    _solve(final)
-    monkeypatch.setattr(safefile, "write_hook", None)
-    assert eligible["n"] >= 50 and len(kept) == 12, (eligible, len(kept))
-    for path in sorted(kept.values()):
+    with disk_before_sampled_writes(final, 12, np.random.default_rng(7)) as seen:
+        _solve(final)
+    assert seen["writes"] >= 50 and len(seen["copies"]) == 12, seen["writes"]
+    for i, data in enumerate(seen["copies"]):
+        path = tmp_path / f"kill{i}.h5"
+        path.write_bytes(data)
         _resumes_bit_for_bit(path, ref)
 
 

@@ -9,7 +9,6 @@ a grid (ducc0 gradients), exact coefficient formulas of the energies, DOP853.
 from __future__ import annotations
 
 import dataclasses
-import os
 from pathlib import Path
 
 import ducc0
@@ -17,9 +16,13 @@ import numpy as np
 import pytest
 
 import isoflow as iso
-from helpers import assert_same_run, compiled_and_numpy, loglog_slope
+from helpers import (
+    assert_same_run,
+    compiled_and_numpy,
+    disk_before_sampled_writes,
+    loglog_slope,
+)
 from isoflow import io, sphere
-from isoflow.io import safefile
 from isoflow.sphere._grid import _to_alm
 
 
@@ -251,31 +254,19 @@ def _solve(path: Path) -> iso.Solution:
     return iso.solve(problem, method, y0, **kw, progress=False, writer=writer)
 
 
-def test_a_kill_at_any_write_of_an_mhd_run_resumes_bit_for_bit(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_kill_at_any_write_of_an_mhd_run_resumes_bit_for_bit(tmp_path: Path) -> None:
     """The file as it was just before a random write (an in-process kill there) resumes to the
     uninterrupted run: both fields, every saved state, bit for bit."""
     _solve(tmp_path / "ref.h5")
     ref = io.load(tmp_path / "ref.h5")
-    rng = np.random.default_rng(5)
-    at = {int(k) for k in rng.integers(0, 300, 6)}
-    count = {"n": 0}
-    copies: list[Path] = []
     final = tmp_path / "run.h5"
-
-    def hook(sf: safefile.SafeFile, offset: int, data: bytes) -> None:
-        count["n"] += 1
-        fd = sf.fileno()
-        if count["n"] in at and final.exists() and os.path.samestat(os.fstat(fd), final.stat()):
-            dst = tmp_path / f"kill{count['n']}.h5"
-            dst.write_bytes(os.pread(fd, os.fstat(fd).st_size, 0))
-            copies.append(dst)
-
-    monkeypatch.setattr(safefile, "write_hook", hook)
-    _solve(final)
-    monkeypatch.setattr(safefile, "write_hook", None)
-    assert len(copies) >= 3, (count, len(copies))
+    with disk_before_sampled_writes(final, 6, np.random.default_rng(5)) as seen:
+        _solve(final)
+    assert seen["writes"] >= 20 and len(seen["copies"]) == 6, seen["writes"]
+    copies = []
+    for i, data in enumerate(seen["copies"]):
+        copies.append(tmp_path / f"kill{i}.h5")
+        copies[-1].write_bytes(data)
     for path in copies:
         part = io.load(path)
         assert part.ys.tobytes() == ref.ys[: len(part.ys)].tobytes()
