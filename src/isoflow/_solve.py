@@ -272,6 +272,7 @@ def solve(
     throw: bool = True,
     writer: StreamWriter | None = None,
     threads: ThreadRequest = None,
+    status_every: float | None = None,
 ) -> Solution:
     r"""Integrate ``problem`` from ``y0`` with a fixed step (no adaptivity, by design).
 
@@ -317,6 +318,11 @@ def solve(
         threads); ``{"blas": b, "numba": m}``: both. Environment variables such as
         ``OPENBLAS_NUM_THREADS`` are upper bounds; more threads than cores are refused
         (:class:`ParameterError`). The counts used are in ``stats.threads``.
+    status_every : float or None
+        For runs left alone for hours: every this many seconds of wall time, one line on stderr
+        with the step, the simulated time, the steps per second (the mean since the first
+        chunk) and the projected end as a clock time (``isoflow run`` writes one a minute).
+        ``None`` (default): none.
 
     Returns
     -------
@@ -331,6 +337,7 @@ def solve(
     """
     _check_objects(problem, method, writer)
     _check_save_every(save_every)
+    _check_status_every(status_every)
     dt_, n = time_grid(t0, t1, dt, n_steps)
     with compile_clock(show=progress is not False) as clock, run_threads(threads) as pools:
         W = _check_state(problem, y0, "y0")
@@ -339,7 +346,20 @@ def solve(
             problem, method, start, t0=float(t0), dt=dt_, grid=SaveGrid(int(save_every), n),
             diagnostics=diagnostics, writer=writer, fresh=True, threads=(threads, pools),
         )  # fmt: skip
-        return run(r, fresh=True, progress=progress, throw=throw, clock=clock)
+        return run(
+            r, fresh=True, progress=progress, throw=throw, clock=clock, status_every=status_every
+        )
+
+
+def _check_status_every(status_every: Any) -> None:
+    """``status_every`` is ``None`` or a positive finite number of seconds."""
+    if status_every is None:
+        return
+    ok = isinstance(status_every, (int, float, np.integer, np.floating))
+    if not ok or isinstance(status_every, bool) or not 0 < float(status_every) < np.inf:
+        raise ParameterError(
+            f"status_every must be a positive number of seconds or None, got {status_every!r}"
+        )
 
 
 def _check_save_every(save_every: Any) -> None:
@@ -424,12 +444,14 @@ def continue_run(
     progress: bool | None = None,
     throw: bool = True,
     threads: ThreadRequest = None,
+    status_every: float | None = None,
 ) -> Solution:
     """Continue a run validated by :func:`check_restart`, appending to ``writer``.
 
-    ``accumulator`` has absorbed the diagnostics of the rows already written; ``threads`` is
-    as in :func:`solve`.
+    ``accumulator`` has absorbed the diagnostics of the rows already written; ``threads`` and
+    ``status_every`` are as in :func:`solve`.
     """
+    _check_status_every(status_every)
     rs = restart
     with compile_clock(show=progress is not False) as clock, run_threads(threads) as pools:
         r = open_run(
@@ -437,4 +459,6 @@ def continue_run(
             grid=SaveGrid(rs.save_every, rs.n_steps), diagnostics=True, writer=writer,
             fresh=False, accumulator=accumulator, threads=(threads, pools),
         )  # fmt: skip
-        return run(r, fresh=False, progress=progress, throw=throw, clock=clock)
+        return run(
+            r, fresh=False, progress=progress, throw=throw, clock=clock, status_every=status_every
+        )

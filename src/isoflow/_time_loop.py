@@ -41,6 +41,7 @@ from ._failures import describe, exception_for
 from ._fingerprint import model_fingerprint
 from ._save_grid import SaveGrid
 from ._solution import RUN_FAILED, RUN_FINISHED, RUN_INTERRUPTED, RunState, Solution, SolveStats
+from ._status_lines import StatusLines
 from ._stepping import PythonRunner, Runner, stop_members_leaving_the_space
 from ._writers import PIPELINE_MIN_ROWS, PIPELINE_SECONDS, MemoryWriter, Sink, StreamWriter
 from .diagnostics import DiagnosticsAccumulator
@@ -300,8 +301,9 @@ class _Outcome:
 
 
 def run(r: OpenRun, *, fresh: bool, progress: bool | None, throw: bool,
-        clock: CompileClock) -> Solution:  # fmt: skip
-    """The loop over chunks (see the module docstring); returns the :class:`Solution`."""
+        clock: CompileClock, status_every: float | None = None) -> Solution:  # fmt: skip
+    """The loop over chunks (see the module docstring); returns the :class:`Solution`.
+    With ``status_every``, a status line every that many seconds (:mod:`isoflow._status_lines`)."""
     from tqdm.auto import tqdm
 
     runner, grid = r.runner, r.grid
@@ -321,6 +323,7 @@ def run(r: OpenRun, *, fresh: bool, progress: bool | None, throw: bool,
         total=n, initial=k0, disable=(None if progress is None else not progress),
         delay=1.0 if progress is None else 0.0, desc=r.method.name, unit="step", leave=False,
     )  # fmt: skip
+    status = StatusLines(status_every, n, r.t0, r.dt)
     reported = runner.failures.failed.size
     last_good = (k0, np.array(r.start.y, copy=True).reshape(M, *alg.shape))  # last checked
     try:
@@ -351,6 +354,7 @@ def run(r: OpenRun, *, fresh: bool, progress: bool | None, throw: bool,
                 if done:
                     r.emit(ks[:done], out[:done].reshape(done, *r.shape))
                 bar.update(max(runner.k - k_before, 0))
+                status.after_chunk(runner.k)
                 newly = runner.failures.failed.size > reported
                 finished = runner.k >= n or not runner.failures.alive.any()
                 if checkpoints.due(done, finished, newly):

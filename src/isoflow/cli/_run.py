@@ -117,9 +117,19 @@ def add_parser(sub: Any) -> None:
         "--flush-seconds",
         type=positive_float,
         default=1.0,
-        help="write at least this often (default 1 s)",
+        help="write the saved states and a checkpoint at least this often (default 1 s; a "
+        "kill loses at most the steps since the last checkpoint)",
     )
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--status-every",
+        type=positive_float,
+        default=60.0,
+        dest="status_every",
+        metavar="SECONDS",
+        help="a status line on stderr this often: step, steps per second, projected end "
+        "(default 60 s; none with --quiet)",
+    )
+    run.add_argument("--quiet", action="store_true", help="no progress bar, no status lines")
     add_thread_options(run)
     run.set_defaults(handler=handle, computes=True)
 
@@ -178,6 +188,7 @@ def _resume(args: argparse.Namespace) -> int:
         chunk_rows=args.chunk_rows,
         flush_seconds=args.flush_seconds,
         force=args.force,
+        status_every=None if args.quiet else args.status_every,
     )
     print("\n".join(summary_lines(f"resumed {args.resume}", sol, args.resume)))
     return 0 if sol.success else 1
@@ -204,7 +215,10 @@ def handle(args: argparse.Namespace) -> int:
     )  # refuses an existing file without --force, and anything that is not a regular file
     problem, y0, method, kwargs = registry.build(cfg, model=spec)
     announce_compiles()
-    sol = solve(problem, method, y0, **kwargs, progress=progress(args), throw=False, writer=writer)
+    sol = solve(
+        problem, method, y0, **kwargs, progress=progress(args), throw=False, writer=writer,
+        status_every=None if args.quiet else args.status_every,
+    )  # fmt: skip
     params = ", ".join(f"{k} = {v}" for k, v in cfg["params"].items())
     title = f"isoflow {__version__} run: {cfg['model']} ({params}), {method.name}"
     print("\n".join(summary_lines(title, sol, out)))

@@ -109,6 +109,7 @@ def resume(
     flush_seconds: float = 1.0,
     force: bool = False,
     threads: ThreadRequest = None,
+    status_every: float | None = None,
 ) -> Solution:
     """Continue a streamed run from its last checkpoint, appending to the same file.
 
@@ -137,6 +138,9 @@ def resume(
         :class:`~isoflow.ModelChangedError`); the file keeps the fingerprint of the first.
     threads : None, int or dict
         As in :func:`isoflow.solve`.
+    status_every : float or None
+        As in :func:`isoflow.solve`: a status line (step, steps per second, projected end)
+        every this many seconds.
 
     Returns
     -------
@@ -216,5 +220,6 @@ def resume(
         if not handed_over:
             lock.release()
     return continue_run(
-        restart, writer=writer, accumulator=acc, progress=progress, throw=throw, threads=threads
-    )
+        restart, writer=writer, accumulator=acc, progress=progress, throw=throw, threads=threads,
+        status_every=status_every,
+    )  # fmt: skip
