@@ -8,7 +8,6 @@ Run alone: ``python benchmarks/bench_7_vortices.py``.
 
 from __future__ import annotations
 
-import functools
 import sys
 import time
 from typing import Any
@@ -109,26 +108,36 @@ def _call_seconds(timer: Any) -> float:
     return float(best)
 
 
-@functools.cache
-def _stage_loop() -> Any:
-    """Compiled loop: ``its`` iterations of the stage from ``X = W``, then the new state
+def _stage_loop_py(iterate, finish, f, fargs, lay, mp, W, X, G, aux, work, E, Wn, h, its, n):  # type: ignore[no-untyped-def]
+    """``n`` steps of ``its`` iterations of the stage from ``X = W``, then the new state
     (compensated by ``E`` unless it is empty, as the driver does)."""
+    sd = np.empty((1, 0))
+    rr = np.zeros(1)
+    fin = np.ones(1, dtype=np.bool_)
+    for _ in range(n):
+        X[:] = W
+        for _ in range(its):
+            iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr)
+            X, G = G, X
+        finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)
+        W[:] = Wn
+
+
+def _stage_loop(runner: Any, args: tuple[Any, ...]) -> Any:
+    """:func:`_stage_loop_py` compiled for the exact types of ``runner``'s stage and field,
+    passed as first-class function types (as the driver is: a dispatcher argument would be
+    typed from whichever of its overloads another benchmark compiled first)."""
     import numba
+    from numba import types
 
-    @numba.njit
-    def loop(iterate, finish, f, fargs, lay, mp, W, X, G, aux, work, E, Wn, h, its, n):  # type: ignore[no-untyped-def]
-        sd = np.empty((1, 0))
-        rr = np.zeros(1)
-        fin = np.ones(1, dtype=np.bool_)
-        for _ in range(n):
-            X[:] = W
-            for _ in range(its):
-                iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr)
-                X, G = G, X
-            finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)
-            W[:] = Wn
+    from isoflow._compiled.signatures import DriverTypes
 
-    return loop
+    dt = DriverTypes(runner.f, runner.fargs, runner.layout.record, runner.mp, runner.W.dtype,
+                     len(runner.core))  # fmt: skip
+    dt.compile_stage(runner.begin, runner.impl.iterate, runner.impl.finish)
+    sig = types.none(dt.iterate, dt.finish, dt.f, dt.fargs,
+                     *(numba.typeof(a) for a in args[4:]), types.int64)  # fmt: skip
+    return numba.njit(sig)(_stage_loop_py)
 
 
 def _stage_only_seconds(runner: Any, its: int, h: float, n: int) -> float:
@@ -140,7 +149,6 @@ def _stage_only_seconds(runner: Any, its: int, h: float, n: int) -> float:
     kernel through numba's first-class function types (what lets one compiled driver serve
     every kernel without compiling per kernel).
     """
-    loop = _stage_loop()
     impl = runner.impl
     W = runner.W[0].copy()
     X, G, aux, Wn = (np.empty_like(W) for _ in range(4))
@@ -149,6 +157,7 @@ def _stage_only_seconds(runner: Any, its: int, h: float, n: int) -> float:
     E = np.zeros_like(W) if compensated else np.empty(0, dtype=W.dtype)
     args = (impl.iterate, impl.finish, runner.f, runner.fargs, runner.layout.record, runner.mp,
             W, X, G, aux, work, E, Wn, h, its)  # fmt: skip
+    loop = _stage_loop(runner, args)
     loop(*args, 1)
     best = np.inf
     for _ in range(5):

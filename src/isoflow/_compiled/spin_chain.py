@@ -245,37 +245,68 @@ def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     rr[0] = acc
 
 
+@numba.njit(cache=True, inline="always", fastmath={"nsz"})
+def _final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
+    """``Wn_i = W_i + h B_i x Y_i``, compensated by ``E`` (TwoSum; no reassociation, which
+    would simplify its exact error away)."""
+    n, k = _U(N), _U(i)
+    n2 = n + n
+    y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
+    b0, b1, b2 = _b(Y, N, c, im, ip)
+    Wn[k], E[k] = two_sum(W[k], h * (b1 * y2 - b2 * y1) + E[k])
+    Wn[n + k], E[n + k] = two_sum(W[n + k], h * (b2 * y0 - b0 * y2) + E[n + k])
+    Wn[n2 + k], E[n2 + k] = two_sum(W[n2 + k], h * (b0 * y1 - b1 * y0) + E[n2 + k])
+
+
 @numba.njit(cache=True, fastmath={"nsz"})
+def _final_compensated(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
+    """:func:`_final_one` for every spin: the interior in a loop of its own with no
+    reduction and no wrapped neighbours, which vectorizes without reassociation. The
+    finiteness check is a pass of its own (:func:`_size`): at N = 1e6 this loop takes 6.4 ns
+    a spin and the check 1.1, against 8.5 for one loop with the sum (compiled with
+    reassociation)."""
+    _final_one(Y, W, Wn, E, N, 0, N - 1, 1 % N, c, h)
+    for i in range(1, N - 1):
+        _final_one(Y, W, Wn, E, N, i, i - 1, i + 1, c, h)
+    if N > 1:
+        _final_one(Y, W, Wn, E, N, N - 1, N - 2, 0, c, h)
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _size(V):  # type: ignore[no-untyped-def]
+    """``sum |V_j|``: finite iff every entry is (a reduction that vectorizes)."""
+    acc = 0.0
+    for j in range(V.shape[0]):
+        acc += abs(V[j])
+    return acc
+
+
+@numba.njit(cache=True, fastmath=_FM)
+def _final_plain(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(Y) x Y`` without compensation; returns a sum that is finite iff every
+    entry is."""
+    acc = _final_at_b(Y, W, Wn, N, 0, N - 1, 1 % N, c, h)
+    for i in range(1, N - 1):
+        acc += _final_at_b(Y, W, Wn, N, i, i - 1, i + 1, c, h)
+    if N > 1:
+        acc += _final_at_b(Y, W, Wn, N, N - 1, N - 2, 0, c, h)
+    return acc
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FM)
+def _final_at_b(Y, W, Wn, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
+    b0, b1, b2 = _b(Y, N, c, im, ip)
+    return _final_at(Y, W, Wn, N, i, b0, b1, b2, h)
+
+
+@numba.njit(cache=True)
 def _final(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(Y) x Y`` (flat ``(3, N)``), compensated by ``E`` unless it is empty;
-    returns a sum that is finite iff every entry is. Compiled without reassociation (the
-    compensation's exact error would be simplified away)."""
-    acc = 0.0
-    n = _U(N)
-    n2 = n + n
-    compensated = E.shape[0] != 0
-    for i in range(N):
-        im = i - 1 if i > 0 else N - 1
-        ip = i + 1 if i < N - 1 else 0
-        k = _U(i)
-        y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
-        b0, b1, b2 = _b(Y, N, c, im, ip)
-        d0 = h * (b1 * y2 - b2 * y1)
-        d1 = h * (b2 * y0 - b0 * y2)
-        d2 = h * (b0 * y1 - b1 * y0)
-        if compensated:
-            v0, E[k] = two_sum(W[k], d0 + E[k])
-            v1, E[n + k] = two_sum(W[n + k], d1 + E[n + k])
-            v2, E[n2 + k] = two_sum(W[n2 + k], d2 + E[n2 + k])
-        else:
-            v0 = W[k] + d0
-            v1 = W[n + k] + d1
-            v2 = W[n2 + k] + d2
-        Wn[k] = v0
-        Wn[n + k] = v1
-        Wn[n2 + k] = v2
-        acc += abs(v0) + abs(v1) + abs(v2)
-    return acc
+    returns a sum that is finite iff every entry of ``Wn`` is."""
+    if E.shape[0] != 0:
+        _final_compensated(Y, W, Wn, E, N, c, h)
+        return _size(Wn)
+    return _final_plain(Y, W, Wn, N, c, h)
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FM)
