@@ -2,7 +2,13 @@
 
 The bound is the memory traffic of one iteration, ``72 N`` bytes (read ``x`` and ``w``, write
 ``G``), over the triad bandwidth ``a = b + s c`` measured in the same run (the best of one and
-of all threads). Target: ratio <= 2 for ``N >= 10^6``. Run alone:
+of all threads). Target: ratio <= 2 for ``N >= 10^6``. The time per iteration is that of whole
+steps over their iterations, so it carries a share of the step's update: IsoMP's default
+compensated update (a TwoSum per entry; the compensation read, written and kept for a failed
+step's undo; a finiteness pass) moves about 190 bytes a spin against the plain update's 72,
+which made a step's time per iteration 11-25 % longer at N = 1e4 and 1e6 on one thread
+(paired runs of both, 2026-11-26); ``ratio_uncompensated`` is the same measurement with
+``compensated=False``. Run alone:
 ``python benchmarks/bench_4_spin_chain_bandwidth.py``.
 """
 
@@ -91,6 +97,17 @@ def run(quick: bool) -> list[dict[str, Any]]:
             if best is None or cand["ns_per_spin_iteration"] < best["ns_per_spin_iteration"]:
                 best = cand
         assert best is not None
+        with thread_limits(blas=1, numba=best["threads"]):  # the update without compensation
+            plain = StepTimer(prob, iso.IsoMP(compensated=False), w0, 0.1)
+            plain.advance(3)
+            its_plain: dict[str, int] = {}
+
+            def uncompensated(t: StepTimer = plain, steps: int = steps,
+                              its: dict = its_plain) -> None:  # fmt: skip
+                its["n"] = t.advance(steps)
+
+            tp = best_time(uncompensated, repeats=3 if N < 10**7 else 1)
+        best["ratio_uncompensated"] = tp / its_plain["n"] / (72.0 * N / max(bw.values()))
         out.append(
             record(
                 4, f"spin chain N = {N:.0e}: time per iteration / memory bound", **best,
