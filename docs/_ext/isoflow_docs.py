@@ -509,7 +509,10 @@ class BenchmarkTable(Directive):
             report = json.loads(path.read_text())
             machine = report.get("machine", {})
             summary = ", ".join(f"{k} {v}" for k, v in machine.items() if not isinstance(v, dict))
-            text = [f"Machine: {summary}.", "", ".. list-table::", "   :header-rows: 1", ""]
+            text = [f"Machine: {summary}.", ""]
+            if report.get("note"):
+                text += [str(report["note"]).rstrip(".") + ".", ""]
+            text += [".. list-table::", "   :header-rows: 1", ""]
             header = ["#", "benchmark", "measured", "target", "met"]
             text += ["   * - " + header[0]] + [f"     - {c}" for c in header[1:]]
             for row in report.get("results", []):
