@@ -4,9 +4,10 @@
 ``W_{k+1} = W_k + h C`` to the next step (an exact TwoSum per entry and a compensation buffer
 of the state's size, :mod:`isoflow.methods.isomp`); ``compensated=False`` is the plain update.
 Both runs take the same steps (the same solves to rounding), timed alternately in the compiled
-loop: the so(10) rigid body (the written-out dense layout, one system) and Euler on the sphere
-at ``N = 256`` (the BLAS layout with its fused finish). Target: ratio <= 1.05 (the issue's
-bound above which the compensation would have to be opt-in). Run alone:
+loop: the so(10) rigid body (the written-out dense layout, one system), Euler on the sphere
+at ``N = 256`` (the BLAS layout with its fused finish), an ensemble of 10^4 so(10) rigid bodies
+(SIMD lanes) and a spin chain of 10^5 spins (the fused sweeps). Target: ratio <= 1.05 (the
+issue's bound above which the compensation would have to be opt-in). Run alone:
 ``python benchmarks/bench_17_compensated.py [--quick]``.
 """
 
@@ -31,7 +32,19 @@ def _ratio(prob: Any, W0: Any, h: float, n: int) -> tuple[float, float, str]:
     return t_on / n, t_off / n, on.label
 
 
-@benchmark(17, "compensated summation on / off, time per step: so(10) and the N = 256 sphere")
+def _ensemble(M: int) -> tuple[Any, Any]:
+    """The so(10) rigid body and ``M`` random members of benchmark 2's size."""
+    import numpy as np
+
+    import isoflow as iso
+
+    prob, W0 = iso.models.rigid_body(10)
+    alg = prob.algebra
+    W = alg.random(0, batch=(M,)) * float(alg.norm(W0) / np.sqrt(alg.dim))
+    return prob, W
+
+
+@benchmark(17, "compensated summation on / off, per step: so(10), the sphere, an ensemble, a chain")
 def run(quick: bool) -> list[dict[str, Any]]:
     import isoflow as iso
 
@@ -42,6 +55,18 @@ def run(quick: bool) -> list[dict[str, Any]]:
             *iso.models.euler_sphere(N=128 if quick else 256, seed=1),
             0.05,
             2 if quick else 5,
+        ),
+        (
+            "ensemble of 10^4 so(10) rigid bodies",
+            *_ensemble(2_000 if quick else 10_000),
+            0.1,
+            20 if quick else 50,
+        ),
+        (
+            "spin chain, N = 10^5",
+            *iso.models.heisenberg_chain(10_000 if quick else 100_000, initial="random", seed=0),
+            0.1,
+            20 if quick else 50,
         ),
     ]
     out = []
