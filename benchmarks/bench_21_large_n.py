@@ -16,6 +16,23 @@ against an older commit, and the thread scaling of one iteration.
 
 Run alone: ``python benchmarks/bench_21_large_n.py``. Without git or the baseline commit,
 part 1 is reported as not measured.
+
+Measured for levers 2 and 3 of issue 24 (this checkout with IsoMP's quartic start, on the
+shared 2-core machine; ``uptime`` load in brackets):
+
+* Part 2 (``bench_21_large_n._thread_scaling``): with no other process running (load 1.0-1.7)
+  1.51x at N = 512 and 1.59x at N = 1024; with another process on a core (load 2.2-3.2)
+  0.08-0.15x at N = 512 and 1.07x at N = 1024 (an OpenBLAS thread waiting for the busy core
+  stalls every product; hence one BLAS thread by default).
+* Where one iteration goes, one thread (the stage's calls timed one by one, best of 3,
+  N = 512 / 1024): the three full real products 36 / 202 ms, the lower-triangle products
+  15 / 92 ms, the passes (splits, gather, combine) 4.1 / 13 ms, ``B(X)`` 2-8 / 6 ms: the
+  products are 81% / 94% of it. Two BLAS threads on one full ``dgemm`` alone (idle): 1.68x
+  at N = 512, 1.82x at N = 1024. With every pass on two threads the bound is about 1.6x at
+  N = 512 and 1.75x at N = 1024; the passes were left serial (at most 4-6% at N = 1024, and
+  a prototype of the combine pass over numba threads ran slower than the serial one as soon
+  as the other core was busy). What keeps the speed-up below 1.7x is BLAS: the thin
+  lower-triangle block products scale worse than a full product.
 """
 
 from __future__ import annotations
