@@ -20,6 +20,10 @@ part 1 is reported as not measured.
 Measured for levers 2 and 3 of issue 24 (this checkout with IsoMP's quartic start, on the
 shared 2-core machine; ``uptime`` load in brackets):
 
+* Part 1 (``bench_21_large_n._against_baseline(N, 50)``, load 3.0 at N = 512, 3-5 at
+  N = 1024): 0.64 of the old commit's time per simulated time at N = 512 (3.38 against 4.28
+  iterations per step), 0.91 at N = 1024 (3.16 against 3.32); the same energy error and
+  Casimir drift (below 2e-15) in both.
 * Part 2 (``bench_21_large_n._thread_scaling``): with no other process running (load 1.0-1.7)
   1.51x at N = 512 and 1.59x at N = 1024; with another process on a core (load 2.2-3.2)
   0.08-0.15x at N = 512 and 1.07x at N = 1024 (an OpenBLAS thread waiting for the busy core
