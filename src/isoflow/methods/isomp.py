@@ -92,7 +92,7 @@ class IsoMP(Method):
         ``p + 1`` offsets: ``(h, D_{k-1}, D_{k-2}, ...)``, newest first. The default was 3
         until the measurement of issue 24 (one BLAS thread, ``rtol = 1e-14``): ``p = 4``
         takes fewer iterations per step in every case measured, 3.4 against 4.3 for Euler on
-        the sphere at ``N = 512`` and 3.5 against 4.1 at ``N = 1024`` (``h ||B||_2 = 0.3``),
+        the sphere at ``N = 512`` and 3.16 against 3.32 at ``N = 1024`` (``h ||B||_2 = 0.3``),
         5.7 against 6.2 at ``N = 256``, 3.0 against 4.0 for the paper's rigid body; 0.74-0.97
         of the time per simulated time from ``N = 256`` at the same energy error and Casimir
         drift (``docs/user_guide/solvers.rst``). Each offset kept costs one state of memory.
