@@ -36,7 +36,15 @@ shared 2-core machine; ``uptime`` load in brackets):
   N = 512 and 1.75x at N = 1024; the passes were left serial (at most 4-6% at N = 1024, and
   a prototype of the combine pass over numba threads ran slower than the serial one as soon
   as the other core was busy). What keeps the speed-up below 1.7x is BLAS: the thin
-  lower-triangle block products scale worse than a full product.
+  lower-triangle block products scale worse than a full product. Measured idle (load 2.0,
+  falling, no other process busy), two BLAS threads against one on the three lower-triangle
+  products with 8 / 4 / 2 equal-area row blocks: 1.40 / 1.43 / 1.55x at N = 512 (10.8 /
+  11.3 / 12.0 ms with two: fewer blocks cost more flops than they gain), 1.71 / 1.78 / 1.82x
+  at N = 1024; one full product 1.53x and 1.91x. At N = 512 the products alone stay below
+  1.7x; at N = 1024 the serial passes (about 6%) are what remains, worth a ``prange`` only
+  with a thread policy that gives a serial run's numba pool the BLAS count (today a single
+  system's ``threads=2`` is 2 BLAS and 1 numba thread, the default 1 BLAS and every core for
+  numba) and a guard against nesting under the ensemble driver's ``prange``.
 """
 
 from __future__ import annotations
