@@ -24,10 +24,10 @@ shared 2-core machine; ``uptime`` load in brackets):
   N = 1024): 0.64 of the old commit's time per simulated time at N = 512 (3.38 against 4.28
   iterations per step), 0.91 at N = 1024 (3.16 against 3.32); the same energy error and
   Casimir drift (below 2e-15) in both.
-* Part 2 (``bench_21_large_n._thread_scaling``): with no other process running (load 1.0-1.7)
-  1.51x at N = 512 and 1.59x at N = 1024; with another process on a core (load 2.2-3.2)
-  0.08-0.15x at N = 512 and 1.07x at N = 1024 (an OpenBLAS thread waiting for the busy core
-  stalls every product; hence one BLAS thread by default).
+* Part 2 (``bench_21_large_n._thread_scaling``): with no other process running (load 1.0-1.9,
+  two runs) 1.51x and 1.48x at N = 512, 1.59x and 1.75x at N = 1024; with another process
+  on a core (load 2.2-3.2) 0.08-0.15x at N = 512 and 1.07x at N = 1024 (an OpenBLAS thread
+  waiting for the busy core stalls every product; hence one BLAS thread by default).
 * Where one iteration goes, one thread (the stage's calls timed one by one, best of 3,
   N = 512 / 1024): the three full real products 36 / 202 ms, the lower-triangle products
   15 / 92 ms, the passes (splits, gather, combine) 4.1 / 13 ms, ``B(X)`` 2-8 / 6 ms: the
