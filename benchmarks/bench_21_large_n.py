@@ -16,6 +16,35 @@ against an older commit, and the thread scaling of one iteration.
 
 Run alone: ``python benchmarks/bench_21_large_n.py``. Without git or the baseline commit,
 part 1 is reported as not measured.
+
+Measured for levers 2 and 3 of issue 24 (this checkout with IsoMP's quartic start, on the
+shared 2-core machine; ``uptime`` load in brackets):
+
+* Part 1 (``bench_21_large_n._against_baseline(N, 50)``, load 3.0 at N = 512, 3-5 at
+  N = 1024): 0.64 of the old commit's time per simulated time at N = 512 (3.38 against 4.28
+  iterations per step), 0.91 at N = 1024 (3.16 against 3.32); the same energy error and
+  Casimir drift (below 2e-15) in both.
+* Part 2 (``bench_21_large_n._thread_scaling``): with no other process running (load 1.0-1.9,
+  two runs) 1.51x and 1.48x at N = 512, 1.59x and 1.75x at N = 1024; with another process
+  on a core (load 2.2-3.2) 0.08-0.15x at N = 512 and 1.07x at N = 1024 (an OpenBLAS thread
+  waiting for the busy core stalls every product; hence one BLAS thread by default).
+* Where one iteration goes, one thread (the stage's calls timed one by one, best of 3,
+  N = 512 / 1024): the three full real products 36 / 202 ms, the lower-triangle products
+  15 / 92 ms, the passes (splits, gather, combine) 4.1 / 13 ms, ``B(X)`` 2-8 / 6 ms: the
+  products are 81% / 94% of it. Two BLAS threads on one full ``dgemm`` alone (idle): 1.68x
+  at N = 512, 1.82x at N = 1024. With every pass on two threads the bound is about 1.6x at
+  N = 512 and 1.75x at N = 1024; the passes were left serial (at most 4-6% at N = 1024, and
+  a prototype of the combine pass over numba threads ran slower than the serial one as soon
+  as the other core was busy). What keeps the speed-up below 1.7x is BLAS: the thin
+  lower-triangle block products scale worse than a full product. Measured idle (load 2.0,
+  falling, no other process busy), two BLAS threads against one on the three lower-triangle
+  products with 8 / 4 / 2 equal-area row blocks: 1.40 / 1.43 / 1.55x at N = 512 (10.8 /
+  11.3 / 12.0 ms with two: fewer blocks cost more flops than they gain), 1.71 / 1.78 / 1.82x
+  at N = 1024; one full product 1.53x and 1.91x. At N = 512 the products alone stay below
+  1.7x; at N = 1024 the serial passes (about 6%) are what remains, worth a ``prange`` only
+  with a thread policy that gives a serial run's numba pool the BLAS count (today a single
+  system's ``threads=2`` is 2 BLAS and 1 numba thread, the default 1 BLAS and every core for
+  numba) and a guard against nesting under the ensemble driver's ``prange``.
 """
 
 from __future__ import annotations

@@ -271,6 +271,13 @@ def test_planar_stage_keeps_the_casimirs_at_rounding(monkeypatch) -> None:
     assert sol.diagnostics.casimir_drift < 1e-13
 
 
+#: Cases where one step's residual lands within 1% of the tolerance, so the two paths' rounding
+#: may take one more iteration on one of them: "hyperbolic vortices 2" with IsoMP's quartic start
+#: (173 compiled against 172 NumPy iterations at rtol = 1e-14; equal counts at 0.99e-14 and
+#: 1.01e-14).
+ON_THE_TOLERANCE = {"hyperbolic vortices 2"}
+
+
 @pytest.mark.parametrize("name", list(CASES))
 def test_compiled_equals_numpy(name: str) -> None:
     """Same saved rows, final state, stored offsets, iterations and failures."""
@@ -278,7 +285,8 @@ def test_compiled_equals_numpy(name: str) -> None:
     prob, y = make()
     a, b = compiled_and_numpy(prob, method, y, h, n, save_every, chunks=(n // 3, n - n // 3))
     assert a.label.startswith("compiled")
-    assert_same_run(a, b, iters_exact="Anderson" not in name)
+    exact = "Anderson" not in name and name not in ON_THE_TOLERANCE
+    assert_same_run(a, b, iters_exact=exact)
 
 
 @pytest.mark.parametrize(

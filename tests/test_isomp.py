@@ -98,6 +98,20 @@ def test_extrapolated_initial_guess_saves_iterations_same_answer() -> None:
     assert b.stats.iterations_mean < a.stats.iterations_mean
 
 
+def test_default_extrapolation_order_4_saves_iterations_over_cubic_same_answer() -> None:
+    """IsoMP's default start is the quartic extrapolation (issue 24): on the paper's rigid body
+    (h = 0.1) it takes about a quarter fewer iterations than the cubic one that was the default
+    (measured 3.0 against 4.0 per step), and reaches the same states."""
+    assert iso.IsoMP().extrapolation_order == 4
+    prob, W0 = iso.models.rigid_body(10)
+    cubic = iso.solve(prob, iso.IsoMP(extrapolation_order=3), W0, dt=0.1, n_steps=300,
+                      save_every=100, progress=False)  # fmt: skip
+    default = iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=300, save_every=100,
+                        progress=False)  # fmt: skip
+    assert float(np.max(np.abs(default.ys - cubic.ys))) <= 1e-13
+    assert default.stats.iterations_mean < 0.85 * cubic.stats.iterations_mean
+
+
 def test_classical_midpoint_is_not_isospectral_but_isomp_is() -> None:
     """The comparison methods drift in the Casimirs where IsoMP does not. (On so(4) both
     Casimirs are quadratic, which the classical midpoint preserves exactly: use so(5).)"""

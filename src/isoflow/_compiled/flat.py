@@ -94,8 +94,8 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
     ``X = W`` when ``nh = 0``; returns :math:`\|W\|^2`.
 
     The sum is evaluated left to right from the newest offset, as the NumPy path does
-    (:meth:`isoflow.IsoMP.initial_stage`); up to four offsets are written out so the loop
-    vectorizes.
+    (:meth:`isoflow.IsoMP.initial_stage`); up to five offsets (IsoMP's default order 4) are
+    written out so the loop vectorizes.
     """
     S = W.shape[0]
     K = ring.shape[0]
@@ -127,9 +127,15 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
         for i in range(S):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i])
         return sumsq(W)
+    a4 = coefs[nh - 1, 4]
+    d4 = ring[_back(head, 4, K)]
+    if nh == 5:  # IsoMP's default order 4
+        for i in range(S):
+            X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i])
+        return sumsq(W)
     for i in range(S):
-        e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i]
-        for q in range(4, nh):
+        e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i]
+        for q in range(5, nh):
             e = e + coefs[nh - 1, q] * ring[(head - q) % K, i]
         X[i] = W[i] + e
     return sumsq(W)
