@@ -254,6 +254,17 @@ def assert_same_run(a: RunResult, b: RunResult, iters_exact: bool = True) -> Non
             assert np.max(np.abs(x - y)) <= FAST_TOL * scale
 
 
+def _writes_to(path: Path, sf: Any) -> bool:
+    """Whether the safe file ``sf`` is the published result file ``path``."""
+    return path.exists() and os.path.samestat(os.fstat(sf.fileno()), path.stat())
+
+
+def _disk(sf: Any) -> bytes:
+    """The bytes of ``sf`` on disk now (what a SIGKILL before the next write leaves)."""
+    fd = sf.fileno()
+    return os.pread(fd, os.fstat(fd).st_size, 0)
+
+
 @contextmanager
 def disk_before_each_write(path: Path) -> Iterator[list[bytes]]:
     """Keep the bytes of the result file ``path`` before every write to it once it is published
@@ -263,9 +274,8 @@ def disk_before_each_write(path: Path) -> Iterator[list[bytes]]:
     copies: list[bytes] = []
 
     def hook(sf: Any, offset: int, data: bytes) -> None:
-        fd = sf.fileno()
-        if path.exists() and os.path.samestat(os.fstat(fd), path.stat()):
-            copies.append(os.pread(fd, os.fstat(fd).st_size, 0))
+        if _writes_to(path, sf):
+            copies.append(_disk(sf))
 
     safefile.write_hook = hook
     try:
@@ -291,14 +301,13 @@ def disk_before_sampled_writes(
     out: dict[str, Any] = {"writes": 0, "copies": []}
 
     def hook(sf: Any, offset: int, data: bytes) -> None:
-        fd = sf.fileno()
-        if not (path.exists() and os.path.samestat(os.fstat(fd), path.stat())):
+        if not _writes_to(path, sf):
             return
         out["writes"] += 1
         i = out["writes"]
         slot = len(kept) if len(kept) < k else int(rng.integers(0, i))
         if slot < k:
-            kept[slot] = (i, os.pread(fd, os.fstat(fd).st_size, 0))
+            kept[slot] = (i, _disk(sf))
 
     safefile.write_hook = hook
     try:
