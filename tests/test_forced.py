@@ -84,6 +84,19 @@ def test_split_step_without_linear_part_is_isomp_bit_for_bit(compiled: bool) -> 
     assert a.ys.tobytes() == b.ys.tobytes()
 
 
+def test_a_failed_split_step_freezes_the_state_before_its_first_half_step() -> None:
+    """The first half step changes the state before the solve: a step whose solve then fails
+    leaves the state where the step began, on the compiled path as on NumPy's."""
+    from helpers import compiled_and_numpy
+
+    prob, W0 = iso.models.euler_sphere(N=8, seed=5, viscosity=0.5, drag=0.2)
+    good, _ = compiled_and_numpy(prob, iso.Strang(), W0, 0.05, 3)
+    tight = iso.Strang(iso.IsoMP(solver=iso.FixedPoint(max_iter=2)))
+    a, b = compiled_and_numpy(prob, tight, good.y, 0.05, 3)
+    assert a.failures.step[0] == b.failures.step[0] == 0  # failed on its first step
+    assert np.array_equal(a.y, good.y) and np.array_equal(b.y, good.y)
+
+
 def test_split_step_is_second_order_on_the_viscous_sphere() -> None:
     """Log-log slope of the error at ``t = 1`` against a run with a 64 times smaller step."""
     F = 0.5 * iso.algebras.su(8).random(seed=4)

@@ -133,10 +133,20 @@ def run_unit(  # type: ignore[no-untyped-def]
     aux = np.empty(S, dtype=dt)
     Wn = np.empty(S, dtype=dt)
     work = np.empty((max(nwork, 1), S), dtype=dt)
-    Wstart = np.empty(S if P > 1 else 1, dtype=dt)
-    # the compensations at the start of a step: a failed step leaves its lane's as they were
-    Estart = np.empty(comp.shape, dtype=comp.dtype)
+    # A step that changes the state before its solve (earlier substeps, a split step's first
+    # half) keeps the state it started from, to freeze a failed lane there.
+    keep_start = P > 1 or plan.begin
+    Wstart = np.empty(S if keep_start else 1, dtype=dt)
+    # One lane and one substep: the new state is written to the second buffer and the two swap
+    # (no copy a step); a failed step leaves the state buffer untouched.
+    swap = L == 1 and not keep_start
+    Wcur = W
+    swapped = False
     compensated = comp.shape[1] != 0
+    # The compensations at the start of a step: a failed lane's are restored. Without lanes to
+    # restore one by one (``swap``), a failed step resets its compensation to zero instead of
+    # copying it every step: a frozen member never steps again, and zero is a valid one.
+    Estart = np.empty(comp.shape if compensated and not swap else (P, 0), dtype=comp.dtype)
     D = data.shape[2]
     sd = np.empty((L, D))
     mm = max(mem, 1)
@@ -174,9 +184,9 @@ def run_unit(  # type: ignore[no-untyped-def]
             for q in range(L):
                 for j in range(D):
                     sd[q, j] = data[step, m0 + q, j]
-        if P > 1:
-            copy(Wstart, W)
-        if compensated:
+        if keep_start:
+            copy(Wstart, Wcur)
+        if compensated and not swap:
             for p in range(P):
                 copy(Estart[p], comp[p])
         for q in range(L):
@@ -186,9 +196,9 @@ def run_unit(  # type: ignore[no-untyped-def]
         for p in range(P):
             hp = gammas[p] * h
             if plan.begin:
-                begin(f, fargs, lay, mp, sd, W, hp)
-            guess(W, ring[p], head[p], nh[p], coefs, X)
-            blocks.lane_sumsq(lay, W, scale2)
+                begin(f, fargs, lay, mp, sd, Wcur, hp)
+            guess(Wcur, ring[p], head[p], nh[p], coefs, X)
+            blocks.lane_sumsq(lay, Wcur, scale2)
             for q in range(L):
                 sc = math.sqrt(scale2[q])
                 tol[q] = solver.atol + solver.rtol * sc
@@ -200,7 +210,7 @@ def run_unit(  # type: ignore[no-untyped-def]
                 its_p[q] = 0
                 going[q] = ok[q]
             for it in range(1, solver.max_iter + 1):
-                iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr)
+                iterate(f, fargs, lay, mp, sd, Wcur, X, G, aux, work, hp, rr)
                 more = False
                 for q in range(L):
                     if going[q]:
@@ -224,7 +234,7 @@ def run_unit(  # type: ignore[no-untyped-def]
                     X, G = G, X
                 else:
                     blocks.select_lanes(lay, X, G, going)
-            finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, comp[p], Wn, fin)
+            finish(f, fargs, lay, mp, sd, Wcur, X, aux, work, hp, comp[p], Wn, fin)
             for q in range(L):
                 if not ok[q]:
                     continue
@@ -242,10 +252,14 @@ def run_unit(  # type: ignore[no-untyped-def]
                 slot = head[p] + 1
                 if slot == K:
                     slot = 0
-                push(ring[p], slot, X, W)
+                push(ring[p], slot, X, Wcur)
                 head[p] = slot
                 nh[p] = min(nh[p] + 1, plan.kmax)
-            blocks.commit_lanes(lay, W, Wn, ok)
+            if not swap:
+                blocks.commit_lanes(lay, Wcur, Wn, ok)
+            elif ok[0]:
+                Wcur, Wn = Wn, Wcur
+                swapped = not swapped
         failed_now = False
         for q in range(L):
             failed = alive[q] and not ok[q]
@@ -260,14 +274,17 @@ def run_unit(  # type: ignore[no-untyped-def]
                 n_alive -= 1
                 failed_now = True
                 _record_failure(rec[m0 + q], k, fail_code[q], its[q], fail_res[q])
-        if failed_now and P > 1:  # earlier substeps of the step were committed: undo them
-            blocks.commit_lanes(lay, W, Wstart, restore)
+        if failed_now and keep_start:  # earlier substeps or a half step changed it: undo them
+            blocks.commit_lanes(lay, Wcur, Wstart, restore)
         if failed_now and compensated:  # and the compensations the step changed
             for p in range(P):
-                blocks.commit_lanes(lay, comp[p], Estart[p], restore)
+                if swap:
+                    comp[p][:] = 0.0
+                else:
+                    blocks.commit_lanes(lay, comp[p], Estart[p], restore)
         to_save -= 1
         if to_save == 0 or k == k_final:  # k % every == 0, without a division per step
-            blocks.store(lay, out, row, m0, nv, W)
+            blocks.store(lay, out, row, m0, nv, Wcur)
             row += 1
         if to_save == 0:
             to_save = every
@@ -275,9 +292,11 @@ def run_unit(  # type: ignore[no-untyped-def]
             for rest in range(step + 1, plan.nsteps):
                 kk = k0 + rest + 1
                 if kk % every == 0 or kk == k_final:
-                    blocks.store(lay, out, row, m0, nv, W)
+                    blocks.store(lay, out, row, m0, nv, Wcur)
                     row += 1
             break
+    if swapped:  # the state is in the second buffer
+        copy(W, Wcur)
     for q in range(nv):
         m = m0 + q
         rec[m, REC_ITERATIONS] += it_tot[q]
