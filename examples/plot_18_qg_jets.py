@@ -34,13 +34,13 @@ for lamb in (0.0, 300.0):
 fig = Figure(figsize=(10, 4), layout="constrained")
 ax_p, ax_t = fig.subplots(1, 2)
 for lamb, sol in runs.items():
-    u = sol.diagnostics.invariants["zonal_wind"]
+    u = sol.diagnostics.observables["zonal_wind"]
     latitude = 90.0 - np.linspace(0.0, 180.0, u.shape[1])
     ax_p.plot(np.mean(u[len(u) // 2 :], axis=0), latitude, label=f"F = {lamb:g}")
 ax_p.axvline(0.0, color="k", lw=0.5, label="no wind")
 ax_p.set(xlabel="zonal-mean wind", ylabel="latitude (degrees)", title="wind profiles")
 ax_p.legend()
-u = runs[300.0].diagnostics.invariants["zonal_wind"]
+u = runs[300.0].diagnostics.observables["zonal_wind"]
 lim = float(np.max(np.abs(u)))
 im = ax_t.pcolormesh(runs[300.0].ts, latitude, u.T, cmap="RdBu_r", vmin=-lim, vmax=lim,
                      shading="nearest")  # fmt: skip

@@ -40,24 +40,31 @@ def test_budgets_and_spectra_are_saved_per_save_and_read_back(
     run = io.load(path)
     n_saves, lmax = 21, 7
     for name in BUDGETS:
-        got = np.asarray(run.series[f"invariants/{name}"])
+        got = np.asarray(run.series[f"observables/{name}"])
         assert got.shape == (n_saves,)
-        assert got.tobytes() == np.asarray(sol.diagnostics.invariants[name]).tobytes()
+        assert got.tobytes() == np.asarray(sol.diagnostics.observables[name]).tobytes()
     for name in SPECTRA:
-        assert np.asarray(run.series[f"invariants/{name}"]).shape == (n_saves, lmax)
-    transfer = np.asarray(run.series["invariants/energy_transfer"])
+        assert np.asarray(run.series[f"observables/{name}"]).shape == (n_saves, lmax)
+    # nothing the forcing changes is reported as a drift, read back or in memory
+    assert not any(k.startswith("invariants/") for k in run.series)
+    assert (
+        run.drifts.keys()
+        == sol.diagnostics.summary().keys()
+        == {"casimir_drift", "max_distance", "hamiltonian_drift", "hamiltonian_relative_drift"}
+    )
+    transfer = np.asarray(run.series["observables/energy_transfer"])
     assert np.abs(transfer.sum(axis=1)).max() < 1e-12 * np.abs(transfer).max()
     # the energy budget closes from the file alone (trapezoid rule over 20 saves: O(dt_save^2))
     E = np.asarray(run.series["hamiltonian"])
-    rate = np.asarray(run.series["invariants/energy_injection"]) - np.asarray(
-        run.series["invariants/energy_dissipation"]
+    rate = np.asarray(run.series["observables/energy_injection"]) - np.asarray(
+        run.series["observables/energy_dissipation"]
     )
     gained = float(np.trapezoid(rate, run.ts))
     assert abs(float(E[-1] - E[0]) - gained) < 1e-2 * abs(gained)
     if model == "qg_sphere":
-        u = np.asarray(run.series["invariants/zonal_wind"])
+        u = np.asarray(run.series["observables/zonal_wind"])
         assert u.shape == (n_saves, 65)
-        assert u.tobytes() == np.asarray(sol.diagnostics.invariants["zonal_wind"]).tobytes()
+        assert u.tobytes() == np.asarray(sol.diagnostics.observables["zonal_wind"]).tobytes()
 
 
 def test_plot_draws_the_budgets_spectra_and_zonal_wind(tmp_path: Path) -> None:
@@ -73,9 +80,9 @@ def test_plot_draws_the_budgets_spectra_and_zonal_wind(tmp_path: Path) -> None:
     spectra = [ln for ln in axes["energy spectrum"].get_lines() if ln.get_label().startswith("t")]
     assert [ln.get_label() for ln in spectra][::5] == ["t = 0", "t = 4"]
     assert all(ln.get_xdata().size == 65 for ln in axes["zonal-mean wind"].get_lines()[:6])
-    # rates, spectra and profiles are not drawn as invariants
-    inv = [ln.get_label() for ln in axes["invariants variation"].get_lines()]
-    assert inv == ["enstrophy"]
+    # rates, spectra, profiles and the enstrophy the forcing changes are not drawn as
+    # invariants: the forced problem has none, the panel shows the distance to the space
+    assert "invariants variation" not in axes and "distance to the space V" in axes
     plotting.save(fig, tmp_path / "q.png")
     assert (tmp_path / "q.png").stat().st_size > 0
 

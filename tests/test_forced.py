@@ -127,7 +127,7 @@ def test_energy_budget_closes_to_the_splitting_error() -> None:
         sol = iso.solve(prob, iso.Strang(), W0, dt=T / n, n_steps=n, progress=False)
         d = sol.diagnostics
         assert d.hamiltonian is not None
-        rate = d.invariants["energy_injection"] - d.invariants["energy_dissipation"]
+        rate = d.observables["energy_injection"] - d.observables["energy_dissipation"]
         gained = float(np.trapezoid(rate, sol.ts))
         return abs(float(d.hamiltonian[-1] - d.hamiltonian[0]) - gained) / abs(gained)
 
@@ -139,7 +139,7 @@ def test_energy_budget_closes_to_the_splitting_error() -> None:
 def test_transfer_spectrum_sums_to_zero() -> None:
     """The bracket moves energy between degrees and conserves it."""
     prob, W0 = iso.models.euler_sphere(N=10, seed=8, viscosity=1e-3)
-    T = prob.invariants["energy_transfer"](W0)
+    T = prob.observables["energy_transfer"](W0)
     assert T.shape == (9,)
     assert abs(float(T.sum())) < 1e-12 * float(np.abs(T).max())
     assert float(np.abs(T).max()) > 0
@@ -156,6 +156,44 @@ def test_double_bracket_keeps_the_spectrum_and_dissipates_energy(compiled: bool)
     assert H is not None
     assert np.all(np.diff(H) < 0)
     assert H[-1] < 0.9 * H[0]
+    d = sol.diagnostics.summary()  # -E is the problem's Lyapunov function; enstrophy a Casimir
+    assert d["lyapunov_max_decrease"] == 0.0 and d["enstrophy_drift"] < 1e-12
+    assert "angular_momentum_z" in sol.diagnostics.observables
+
+
+def test_a_forced_run_reports_no_drift_for_what_it_changes_by_design() -> None:
+    """Spectra, budgets, enstrophy and momentum of a forced dissipative run are observables:
+    saved, no drift; the ideal model keeps them as invariants."""
+    ideal, W0 = iso.models.euler_sphere(N=8, seed=5)
+    prob, _ = iso.models.euler_sphere(N=8, seed=5, viscosity=0.05, drag=0.2, forcing=0.5 * W0)
+    assert set(ideal.invariants) == {"enstrophy", "angular_momentum"} and not ideal.observables
+    assert not prob.invariants and prob.forced_or_dissipative and not ideal.forced_or_dissipative
+    sol = iso.solve(prob, iso.Strang(), W0, dt=0.05, n_steps=10, progress=False)
+    d = sol.diagnostics
+    assert d.forced_or_dissipative
+    assert set(d.observables) == {
+        "enstrophy", "angular_momentum", "energy_spectrum", "enstrophy_spectrum",
+        "energy_transfer", "energy_dissipation", "enstrophy_dissipation", "energy_injection",
+        "enstrophy_injection",
+    }  # fmt: skip
+    assert d.observables["energy_spectrum"].shape == (11, 7)
+    assert set(d.summary()) == {
+        "casimir_drift",
+        "max_distance",
+        "hamiltonian_drift",
+        "hamiltonian_relative_drift",
+    }
+
+
+def test_observables_and_invariants_need_distinct_names_and_functions() -> None:
+    prob, _ = iso.models.euler_sphere(N=4, seed=1)
+    f = prob.invariants["enstrophy"]
+    with pytest.raises(iso.ParameterError, match="'enstrophy' named both an invariant and an"):
+        dataclasses.replace(prob, observables={"enstrophy": f})
+    with pytest.raises(iso.ParameterError, match="observables must map names"):
+        dataclasses.replace(prob, observables={"x": 1.0})
+    with pytest.raises(iso.ParameterError, match="invariants must be a mapping"):
+        dataclasses.replace(prob, invariants=[f])
 
 
 def test_double_bracket_sign_of_the_energy_rate() -> None:

@@ -97,7 +97,7 @@ def test_casimirs_of_the_potential_vorticity_at_rounding_and_energy_bounded() ->
     assert float(np.max(sol.diagnostics.casimir_drift)) < 1e-12
     assert sol.diagnostics.hamiltonian_relative_drift is not None
     assert float(np.max(sol.diagnostics.hamiltonian_relative_drift)) < 1e-3
-    u = sol.diagnostics.invariants["zonal_wind"]
+    u = sol.diagnostics.observables["zonal_wind"]
     assert u.shape == (21, 65)
 
 
@@ -140,7 +140,7 @@ def test_qg_energy_budget_closes_with_dissipation_and_forcing() -> None:
         assert "compiled" in sol.stats.runner
         d = sol.diagnostics
         assert d.hamiltonian is not None
-        rate = d.invariants["energy_injection"] - d.invariants["energy_dissipation"]
+        rate = d.observables["energy_injection"] - d.observables["energy_dissipation"]
         gained = float(np.trapezoid(rate, sol.ts))
         return abs(float(d.hamiltonian[-1] - d.hamiltonian[0]) - gained) / abs(gained)
 
@@ -171,8 +171,8 @@ def test_qg_band_forcing_injects_the_requested_rate_of_qg_energy() -> None:
     kw = {"N": 8, "omega": 1.0, "drag": 0.1, "forcing_band": (3, 1), "energy_rate": 0.1}
     pq, Qq = iso.models.qg_sphere(lamb=50.0, **kw)
     pe, We = iso.models.euler_sphere(**kw)
-    assert float(pq.invariants["energy_injection"](Qq)) == pytest.approx(0.1, rel=1e-12)
-    assert float(pe.invariants["energy_injection"](We)) == pytest.approx(0.1, rel=1e-12)
+    assert float(pq.observables["energy_injection"](Qq)) == pytest.approx(0.1, rel=1e-12)
+    assert float(pe.observables["energy_injection"](We)) == pytest.approx(0.1, rel=1e-12)
     sigma_q = pq.parameters["forcing"][0]["sigma_rms"]
     sigma_e = pe.parameters["forcing"][0]["sigma_rms"]
     assert sigma_q > 1.3 * sigma_e

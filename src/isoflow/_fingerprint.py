@@ -123,6 +123,8 @@ def _values_at(problem: IsospectralProblem, P: Array) -> dict[str, list[float] |
         functions["lyapunov"] = problem.lyapunov
     for name, fn in problem.invariants.items():
         functions[f"invariant {name}"] = fn
+    for name, fn in problem.observables.items():
+        functions[f"observable {name}"] = fn
     if problem.noise is not None:
         functions["noise"] = functools.partial(_noise_probe, problem)
     out: dict[str, list[float] | None] = {}

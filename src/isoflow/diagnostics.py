@@ -10,6 +10,9 @@ All drifts are maxima over the saved times of the deviation from the first saved
   ``L`` that the exact flow never decreases (zero means monotone on the saved states);
 * ``invariant_drift[name]``: :math:`\max_t \max |I(t) - I(t_0)|` (absolute);
 * ``max_distance``: :math:`\max_t \operatorname{dist}(W(t), V)` (Frobenius, absolute).
+
+A problem's ``observables`` (spectra, budget rates, quantities that a forcing or a dissipation
+changes) are saved and returned as series, with no drift.
 """
 
 from __future__ import annotations
@@ -48,6 +51,11 @@ class Diagnostics:
     hamiltonian, hamiltonian_drift, hamiltonian_relative_drift : ndarray or None
     lyapunov, lyapunov_max_decrease : ndarray or None
     invariants, invariant_drift : dict
+    observables : dict
+        The series of the problem's observables (no drift: they are not conserved).
+    forced_or_dissipative : bool
+        The problem's linear part or forcing changes the Casimirs and the energy by design
+        (their "drifts" are then changes, not errors).
     """
 
     ts: Array
@@ -62,6 +70,8 @@ class Diagnostics:
     lyapunov_max_decrease: Array | None = None
     invariants: dict[str, Array] = field(default_factory=dict)
     invariant_drift: dict[str, Array] = field(default_factory=dict)
+    observables: dict[str, Array] = field(default_factory=dict)
+    forced_or_dissipative: bool = False
 
     def summary(self) -> dict[str, float]:
         """Worst case over the ensemble of every drift, as plain floats (JSON-ready)."""
@@ -84,7 +94,8 @@ def series(problem: IsospectralProblem, ys: Array) -> dict[str, Array]:
     """Per-state diagnostic series of the states ``ys`` (time first): name -> array.
 
     ``casimirs``, ``distance`` and, where the problem has them, ``hamiltonian``,
-    ``lyapunov`` and ``invariants/<name>``; each time first, ``(n, *batch, ...)``.
+    ``lyapunov``, ``invariants/<name>`` and ``observables/<name>``; each time first,
+    ``(n, *batch, ...)``.
 
     Raises
     ------
@@ -103,6 +114,8 @@ def series(problem: IsospectralProblem, ys: Array) -> dict[str, Array]:
             out[name] = _user_series(fn, ys, name, batch, scalar=True)
     for name, fn in problem.invariants.items():
         out[f"invariants/{name}"] = _user_series(fn, ys, f"invariant {name!r}", batch)
+    for name, fn in problem.observables.items():
+        out[f"observables/{name}"] = _user_series(fn, ys, f"observable {name!r}", batch)
     return out
 
 
@@ -167,6 +180,8 @@ class DriftAccumulator:
         self.last = {k: np.array(v[-1:], copy=True) for k, v in series.items()}
         first = self.first
         for name, v in series.items():
+            if name.startswith("observables/"):  # not conserved: no drift
+                continue
             if name == "casimirs":
                 dev = np.max(np.abs(v - first[name]) / self.scale, axis=(0, v.ndim - 1))
             elif name == "distance":
@@ -270,6 +285,7 @@ class DiagnosticsAccumulator:
         if "lyapunov" in full:
             kw.update(lyapunov=full["lyapunov"], lyapunov_max_decrease=d["lyapunov_max_decrease"])
         names = [k.split("/", 1)[1] for k in full if k.startswith("invariants/")]
+        observed = [k.split("/", 1)[1] for k in full if k.startswith("observables/")]
         return Diagnostics(
             ts=ts,
             casimirs=full["casimirs"],
@@ -278,6 +294,8 @@ class DiagnosticsAccumulator:
             max_distance=d["max_distance"],
             invariants={n: full[f"invariants/{n}"] for n in names},
             invariant_drift={n: d[f"{n}_drift"] for n in names},
+            observables={n: full[f"observables/{n}"] for n in observed},
+            forced_or_dissipative=self.problem.forced_or_dissipative,
             **kw,
         )
 

@@ -46,17 +46,6 @@ def _component(run: Any, idx: tuple[int, ...]) -> str:
     return f"W[{', '.join(map(str, idx))}]"
 
 
-#: Diagnostics of forced and dissipative runs (:func:`isoflow.models.euler_sphere`,
-#: :func:`isoflow.models.qg_sphere`): rates, spectra and profiles, not invariants. A result
-#: file holding them gets a row of panels of its own (:func:`plot_run`).
-BUDGET_RATES = (
-    "energy_injection", "energy_dissipation", "enstrophy_injection", "enstrophy_dissipation",
-)  # fmt: skip
-SPECTRA = ("energy_spectrum", "enstrophy_spectrum", "energy_transfer")
-PROFILES = ("zonal_wind",)
-_DIAGNOSTICS = (*BUDGET_RATES, *SPECTRA, *PROFILES)
-
-
 def plot_run(run: Any) -> Figure:
     """Invariants and state components of a result file (:class:`isoflow.io.RunData`).
 
@@ -104,7 +93,7 @@ def plot_run(run: Any) -> Figure:
 def _diagnostic_panels(s: dict[str, Any]) -> list[list[str]]:
     """The keys of the diagnostics panels the series ``s`` fill, by row: the budgets, then
     the spectra and the wind (no empty row)."""
-    has = {k.split("/", 1)[1] for k in s if k.startswith("invariants/")}
+    has = {k.split("/", 1)[1] for k in s if k.startswith("observables/")}
     budgets = [key for key, names in (("b", {"energy_injection", "energy_dissipation"}),
                                       ("z", {"enstrophy_injection", "enstrophy_dissipation"}))
                if has & names]  # fmt: skip
@@ -135,8 +124,8 @@ def _enstrophy_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
 def _rates(ax: Any, ts: Any, s: dict[str, Any], quantity: str) -> None:
     """The injection, dissipation and net rates of ``quantity`` (``energy``, ``enstrophy``)."""
     zero = np.zeros(len(ts))
-    inj = np.real(s.get(f"invariants/{quantity}_injection", zero)).reshape(-1)
-    dis = np.real(s.get(f"invariants/{quantity}_dissipation", zero)).reshape(-1)
+    inj = np.real(s.get(f"observables/{quantity}_injection", zero)).reshape(-1)
+    dis = np.real(s.get(f"observables/{quantity}_dissipation", zero)).reshape(-1)
     ax.plot(ts, inj, lw=0.9, label="injection")
     ax.plot(ts, dis, lw=0.9, label="dissipation")
     ax.plot(ts, inj - dis, lw=0.9, color="k", label="injection - dissipation")
@@ -153,14 +142,14 @@ def _spectrum_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
     """The saved energy spectrum at up to six saves (log-log)."""
     from .sphere.figures import draw_energy_spectrum
 
-    E = np.real(s["invariants/energy_spectrum"])
+    E = np.real(s["observables/energy_spectrum"])
     draw_energy_spectrum(ax, {f"t = {ts[i]:.3g}": E[i] for i in _save_indices(len(ts))})
     ax.set_title("energy spectrum")
 
 
 def _transfer_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
     """The bracket's energy transfer per degree at the first and the last save."""
-    T = np.real(s["invariants/energy_transfer"])
+    T = np.real(s["observables/energy_transfer"])
     ls = np.arange(1, T.shape[1] + 1)
     for i in sorted({0, len(ts) - 1}):
         ax.plot(ls, T[i], lw=0.9, marker=".", label=f"t = {ts[i]:.3g}")
@@ -174,7 +163,7 @@ def _transfer_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
 
 def _wind_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
     """The zonal-mean eastward wind against latitude, one curve per save (up to six)."""
-    u = np.real(s["invariants/zonal_wind"])
+    u = np.real(s["observables/zonal_wind"])
     lat = 90.0 - np.linspace(0.0, 180.0, u.shape[1])  # saved pole to pole in colatitude
     for i in _save_indices(len(ts)):
         ax.plot(u[i], lat, lw=0.9, label=f"t = {ts[i]:.3g}")
@@ -210,7 +199,7 @@ def _energy_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
 
 def _invariants_panel(ax: Any, ts: Any, s: dict[str, Any]) -> None:
     """The variation of the problem's invariants, or else the distance to the space."""
-    names = [k for k in s if k.startswith("invariants/") and k.split("/", 1)[1] not in _DIAGNOSTICS]
+    names = [k for k in s if k.startswith("invariants/")]
     if names:
         cols, labels = [], []
         for k in names:

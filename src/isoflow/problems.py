@@ -77,6 +77,11 @@ class IsospectralProblem:
         (:class:`isoflow.noise.TransportNoise`): the problem is then the stochastic
         Lie–Poisson system :math:`dW = [B(W), W]\,dt + \sum_i [B_i(W), W] \circ d\beta_i`,
         integrated by :class:`~isoflow.StochasticIsoMP` (the deterministic methods refuse it).
+    observables : mapping of str to callable, optional
+        Further quantities ``O(W) -> (*batch,)`` or ``(*batch, ...)`` saved with every state
+        and drawn by ``isoflow plot``, for which no drift is reported: spectra, budget rates,
+        or quantities that a forcing or a dissipation changes by design. The names must
+        differ from those of ``invariants``.
     """
 
     B: Callable[[Array], Array] = None  # type: ignore[assignment]
@@ -92,6 +97,7 @@ class IsospectralProblem:
     linear_part: LinearPart | None = None
     forcing: Forcing | StochasticForcing | Sequence[Forcing | StochasticForcing] = ()
     noise: TransportNoise | None = None
+    observables: Mapping[str, Callable[[Array], Array]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.algebra, Algebra):
@@ -119,6 +125,26 @@ class IsospectralProblem:
         if not callable(self.B):
             raise TypeError(f"B must be callable, got {type(self.B).__name__}")
         self._check_split_parts()
+        self._check_diagnostic_functions()
+
+    def _check_diagnostic_functions(self) -> None:
+        """Invariants and observables: callables under distinct string names."""
+        for what, functions in (("invariants", self.invariants), ("observables", self.observables)):
+            if not isinstance(functions, Mapping):
+                raise ParameterError(
+                    f"{what} must be a mapping of names to functions, got "
+                    f"{type(functions).__name__}"
+                )
+            for name, fn in functions.items():
+                if not isinstance(name, str) or not callable(fn):
+                    raise ParameterError(
+                        f"{what} must map names (str) to functions, got {name!r}: {fn!r}"
+                    )
+        both = sorted(set(self.invariants) & set(self.observables))
+        if both:
+            raise ParameterError(
+                f"{', '.join(map(repr, both))} named both an invariant and an observable"
+            )
 
     def _check_split_parts(self) -> None:
         """Check the linear part and the forcings against the space (typed one-line errors)."""
@@ -150,6 +176,11 @@ class IsospectralProblem:
                     f"forcing terms must be iso.Forcing or iso.StochasticForcing, got {f!r}"
                 )
         object.__setattr__(self, "forcing", terms)
+
+    @property
+    def forced_or_dissipative(self) -> bool:
+        """Whether a linear part or a forcing changes the Casimirs and the energy by design."""
+        return self.linear_part is not None or bool(self.forcing)
 
     # ---- evaluation ---------------------------------------------------------------------
     def evaluate_B(self, W: Array) -> Array:

@@ -155,6 +155,9 @@ def summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
         *((k, f"{v:.3e}") for k, v in d.items()),
         ("status", sol.message),
     ]
+    if sol.diagnostics is not None and sol.diagnostics.forced_or_dissipative:
+        note = "forced or dissipative: Casimirs and energy change by design (drifts are changes)"
+        rows.insert(5, ("note", note))
     if path is not None:
         rows.append(("file", path))
     return [title, *table(rows)]

@@ -92,7 +92,7 @@ def _stochastic_run(N: int, lf: int, eps: float, alpha: float, nu2: float, h: fl
     d = sol.diagnostics
     assert d is not None and d.hamiltonian is not None
     ts, E = sol.ts, np.asarray(d.hamiltonian)
-    D = np.asarray(d.invariants["energy_dissipation"])
+    D = np.asarray(d.observables["energy_dissipation"])
     c = sphere.to_coefficients(sol.ys)
     qv = _noise_variance_rate(prob, c)
     k = len(ts) // 2
@@ -123,8 +123,8 @@ def _deterministic_residual(N: int, lf: int, eps: float, alpha: float, nu2: floa
     sol = solve(prob, Strang(), W0, dt=T / n, n_steps=n, progress=False)
     d = sol.diagnostics
     assert d is not None and d.hamiltonian is not None
-    rate = np.asarray(d.invariants["energy_injection"]) - np.asarray(
-        d.invariants["energy_dissipation"]
+    rate = np.asarray(d.observables["energy_injection"]) - np.asarray(
+        d.observables["energy_dissipation"]
     )
     gained = float(np.trapezoid(rate, sol.ts))
     change = float(d.hamiltonian[-1] - d.hamiltonian[0])

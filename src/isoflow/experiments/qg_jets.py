@@ -65,7 +65,7 @@ def _run(N: int, lamb: float, omega: float, h: float, T: float, seed: int, rtol:
     assert d is not None and d.hamiltonian is not None
     rel = sol.ys - models.coriolis_matrix(N, omega)
     P = sphere.solve_poisson(rel) if lamb == 0.0 else qg_operator(N, lamb).solve(rel)
-    u = np.asarray(d.invariants["zonal_wind"])
+    u = np.asarray(d.observables["zonal_wind"])
     lat = 90.0 - np.linspace(0.0, 180.0, ZONAL_LATITUDES)
     H = np.asarray(d.hamiltonian)
     return {

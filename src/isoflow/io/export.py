@@ -86,4 +86,6 @@ def solution_diagnostics(run: RunData, problem: IsospectralProblem) -> Diagnosti
         lyapunov_max_decrease=d.lyapunov_max_decrease,
         invariants={k: run.series[f"invariants/{k}"] for k in d.invariants},
         invariant_drift=d.invariant_drift,
+        observables={k: run.series[f"observables/{k}"] for k in d.observables},
+        forced_or_dissipative=d.forced_or_dissipative,
     )

@@ -8,7 +8,7 @@ A file is one HDF5 file:
   and ``header_crc`` (CRC-32 of config and meta). Nothing is pickled or evaluated;
 * ``ts`` ``(n,)`` and ``ys`` ``(n, *shape)``: saved times and states, resizable and chunked;
 * ``diagnostics/...``: per saved state Casimirs, distance to ``V``, Hamiltonian, Lyapunov
-  function and the problem's invariants;
+  function and the problem's invariants and observables;
 * ``checksums`` ``(n_blocks, 3 + n_series)`` (int64): one row per block of rows written
   together: its end row, then the CRC-32 of the block's bytes of ``ts``, ``ys`` and of every
   diagnostics dataset (in the order of the dataset's ``columns`` attribute);

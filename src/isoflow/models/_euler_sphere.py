@@ -31,7 +31,7 @@ from ..sphere import (
 from ..sphere._basis import basis_matrix
 from ..sphere._operators import check_N
 from ._checks import require_memory
-from ._forced import budget_invariants, check_double_bracket, sphere_split
+from ._forced import budget_observables, check_double_bracket, sphere_split
 from ._noise import transport_noise
 
 __all__ = ["coriolis_matrix", "euler_sphere", "initial_vorticity", "large_scale_noise"]
@@ -195,7 +195,9 @@ def euler_sphere(
     double_bracket : float
         Selective decay :math:`\alpha_{db} \ge 0`: ``B`` gains :math:`-\alpha_{db}[\Psi, Q]`
         (:func:`isoflow.sphere.compiled.euler_double_bracket_field`): the energy decreases, every
-        Casimir is kept (the flow stays isospectral; IsoMP integrates it as it is).
+        Casimir is kept (the flow stays isospectral; IsoMP integrates it as it is). The
+        problem's ``lyapunov`` is then :math:`-E` (the diagnostics report any increase of the
+        energy) and the angular momentum, which it changes, is an observable.
 
     With dissipation or forcing the problem has a linear part and forcing terms, and runs with
     the split method :class:`~isoflow.Strang` (``iso.Strang()``); its diagnostics then include
@@ -214,7 +216,10 @@ def euler_sphere(
         On ``su(N)`` with the compiled kernel, ``hamiltonian`` (energy of the relative
         vorticity), ``invariants``: ``"enstrophy"`` (:math:`\frac12\int q^2`, of the state),
         ``"angular_momentum"`` (:math:`\int\omega\,x_a\,dA`, ``(3,)``; only for
-        ``omega = 0``) or ``"angular_momentum_z"`` (for ``omega != 0``); and
+        ``omega = 0``) or ``"angular_momentum_z"`` (for ``omega != 0``); with dissipation or
+        forcing these are ``observables`` instead (saved and drawn, no drift), with the
+        spectra, the transfer and the budgets (:mod:`isoflow.models._forced`; with the
+        double bracket alone the invariants stay and the spectra are observables); and
         ``parameters``: ``N, omega, hbar, seed, initial`` (``"random"``, ``"coefficients"``,
         ``"function"`` or ``"matrix"``) and, for random data, ``lmin, lmax, slope, rms``.
     Q0 : ndarray, shape (*batch, N, N)
@@ -335,6 +340,13 @@ def euler_sphere(
     else:
         invariants["angular_momentum_z"] = lambda Q: angular_momentum(np.asarray(Q) - F)[..., 2]
 
+    observables: dict[str, Callable[[Array], Array]] = {}
+    if split.active:  # the linear part and the forcing change them by design
+        observables.update(invariants)
+        invariants.clear()
+    elif alpha:  # the double bracket keeps the Casimirs (the enstrophy), not the momentum
+        observables.update({k: v for k, v in invariants.items() if k != "enstrophy"})
+        invariants = {"enstrophy": enstrophy}
     if split.active or alpha:
 
         def tendency(Q: Array) -> Array:
@@ -350,8 +362,8 @@ def euler_sphere(
         def noise_weight(modes: Array) -> Array:
             return 1.0 / (degrees[modes] * (degrees[modes] + 1.0))
 
-        invariants.update(
-            budget_invariants(
+        observables.update(
+            budget_observables(
                 N, split, relative, lambda Q: solve_poisson(relative(Q)), tendency, noise_weight
             )
         )
@@ -369,7 +381,9 @@ def euler_sphere(
         kernel=kernel,
         noise=transport,
         hamiltonian=hamiltonian,
+        lyapunov=(lambda Q: -hamiltonian(Q)) if alpha and not split.active else None,
         invariants=invariants,
+        observables=observables,
         name=f"Euler equations on the sphere, su({N})" + (f", Omega = {Om:g}" if Om else ""),
         parameters=parameters,
         linear_part=split.linear_part,

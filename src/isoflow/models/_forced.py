@@ -187,7 +187,7 @@ class _Coefficients:
         return c
 
 
-def budget_invariants(
+def budget_observables(
     N: int,
     spec: SplitSpec,
     relative: Callable[[Array], Array],
@@ -195,7 +195,8 @@ def budget_invariants(
     tendency: Callable[[Array], Array],
     noise_weight: Callable[[Array], Array],
 ) -> dict[str, Callable[[Array], Array]]:
-    r"""The spectra, dissipation, injection and transfer diagnostics of a sphere model.
+    r"""The spectra, dissipation, injection and transfer diagnostics of a sphere model (the
+    problem's ``observables``: saved and drawn, no drift).
 
     ``relative(Q)`` is the relative (potential) vorticity :math:`q` of states ``Q``,
     ``stream(Q)`` their stream matrix :math:`\psi`, ``tendency(Q)`` the bracket's

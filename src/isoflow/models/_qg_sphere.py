@@ -63,7 +63,7 @@ from ..sphere import (
 from ..sphere._operators import as_matrices, check_N, factor_diagonals
 from ._checks import require_memory
 from ._euler_sphere import coriolis_matrix, euler_sphere, initial_vorticity, real_parameter
-from ._forced import budget_invariants, sphere_split
+from ._forced import budget_observables, sphere_split
 
 __all__ = ["QGOperator", "qg_operator", "qg_sphere", "zonal_wind"]
 
@@ -212,10 +212,12 @@ def qg_sphere(
     problem : IsospectralProblem
         On ``su(N)`` with the compiled kernel; the
         ``hamiltonian`` is the energy :math:`E = -\frac{2\pi}{N}\operatorname{Re}
-        \operatorname{Tr}(\Psi^\dagger(Q - F_\Omega))`; ``invariants``: ``"enstrophy"``,
-        ``"zonal_wind"`` (on :data:`ZONAL_LATITUDES` colatitudes, see :func:`zonal_wind`),
-        the kinetic ``"energy_spectrum"``, ``"enstrophy_spectrum"``, ``"energy_transfer"`` and,
-        with dissipation or forcing, the budgets (:mod:`isoflow.models._forced`).
+        \operatorname{Tr}(\Psi^\dagger(Q - F_\Omega))`; ``invariants``: ``"enstrophy"``
+        (an ``observable`` with dissipation or forcing, which change it); ``observables``
+        (saved and drawn, no drift): ``"zonal_wind"`` (on :data:`ZONAL_LATITUDES`
+        colatitudes, see :func:`zonal_wind`), the kinetic ``"energy_spectrum"``,
+        ``"enstrophy_spectrum"``, ``"energy_transfer"`` and, with dissipation or forcing, the
+        budgets (:mod:`isoflow.models._forced`).
     Q0 : ndarray, shape (*batch, N, N)
 
     Raises
@@ -304,11 +306,14 @@ def qg_sphere(
         return energy_weight(split.linear_part.modes(modes))
 
     theta = np.linspace(0.0, np.pi, ZONAL_LATITUDES)
-    invariants: dict[str, Callable[[Array], Array]] = {
-        "enstrophy": enstrophy,
+    invariants: dict[str, Callable[[Array], Array]] = {"enstrophy": enstrophy}
+    observables: dict[str, Callable[[Array], Array]] = {
         "zonal_wind": lambda Q: zonal_wind(stream(Q), theta),
     }
-    invariants.update(budget_invariants(N, split, relative, stream, tendency, noise_weight))
+    if split.active:  # the linear part and the forcing change it by design
+        observables.update(invariants)
+        invariants.clear()
+    observables.update(budget_observables(N, split, relative, stream, tendency, noise_weight))
     parameters: dict[str, Any] = {
         "N": N, "lamb": lamb_, "omega": Om, "kappa": kappa, "hbar": h, "seed": int(seed),
         "initial": kind, **extra, **split.parameters,
@@ -318,6 +323,7 @@ def qg_sphere(
         kernel=kernel,
         hamiltonian=hamiltonian,
         invariants=invariants,
+        observables=observables,
         name=f"quasi-geostrophic model on the sphere, su({N}), F = {lamb_:g}"
         + (f", kappa = {kappa:g}" if kappa else "")
         + (f", Omega = {Om:g}" if Om else ""),
@@ -342,7 +348,7 @@ def _as_qg(built: tuple[IsospectralProblem, Array]) -> tuple[IsospectralProblem,
     from ..sphere import solve_poisson
 
     theta = np.linspace(0.0, np.pi, ZONAL_LATITUDES)
-    invariants = dict(prob.invariants)
-    invariants["zonal_wind"] = lambda Q: zonal_wind(solve_poisson(np.asarray(Q) - F), theta)
+    observables = dict(prob.observables)
+    observables["zonal_wind"] = lambda Q: zonal_wind(solve_poisson(np.asarray(Q) - F), theta)
     params = {**prob.parameters, "lamb": 0.0, "kappa": 0.0}
-    return dataclasses.replace(prob, invariants=invariants, parameters=params), Q0
+    return dataclasses.replace(prob, observables=observables, parameters=params), Q0

@@ -44,8 +44,9 @@ def read_task(
     """Everything :func:`open_sweep` takes from one task file, member first.
 
     ``y`` ``(members, time, *shape)``, ``y_final`` ``(members, *shape)`` and each diagnostic
-    series ``(members, time, ...)`` (``invariants/<name>`` as ``invariants_<name>``), on the
-    sweep's time grid. One read of the file (:func:`isoflow.io.load`, every row checked).
+    series ``(members, time, ...)`` (``invariants/<name>`` as ``invariants_<name>``, likewise
+    ``observables/<name>``), on the sweep's time grid. One read of the file
+    (:func:`isoflow.io.load`, every row checked).
 
     Raises
     ------
