@@ -9,6 +9,16 @@ at ``N = 256`` (the BLAS layout with its fused finish), an ensemble of 10^4 so(1
 (SIMD lanes) and a spin chain of 10^5 spins (the fused sweeps). Target: ratio <= 1.05 (the
 issue's bound above which the compensation would have to be opt-in). Run alone:
 ``python benchmarks/bench_17_compensated.py [--quick]``.
+
+**How far and why** (idle machine, ``python benchmarks/run_all.py --only 4,5,17``, after the
+compiled loop stopped copying a single system's state and compensation every step): so(10)
+1.02, the ensemble 1.04-1.09, the chain 1.03-1.16 over four runs (1.12-1.22 before). The
+chain and the ensemble are bound by memory traffic, not by flops: a step there is a dozen
+sweeps of a few arrays, and the compensated update reads and writes the compensation buffer
+once more (48 bytes a spin against about 70 an iteration), which no arrangement of the
+arithmetic removes. The sphere's ratio at ``N = 256`` (1.03 committed) is within its
+run-to-run noise (0.78-1.03). The plain update stays one keyword away
+(``iso.IsoMP(compensated=False)``); the solvers guide says when a run may take it.
 """
 
 from __future__ import annotations

@@ -5,7 +5,10 @@ fixed-point solver, timed alternately over enough steps to last about 0.3 s. Tar
 IsoMP / spherical midpoint <= 1. IsoMP runs with its default compensated update (an exact
 TwoSum per entry and a compensation buffer; the spherical midpoint has none): its cost is
 recorded as ``ratio_uncompensated``, IsoMP with ``compensated=False`` against the same
-spherical midpoint. ``run_all.py --figure PNG`` draws time per step against ``N``.
+spherical midpoint. Measured on the idle machine (``python benchmarks/run_all.py --only
+4,5,17``): 0.38-0.44 at ``N = 10^3 .. 10^5`` with the compensation (0.37-0.39 without it),
+against 0.33-0.40 for the code before the compensated update (``ed279d5``).
+``run_all.py --figure PNG`` draws time per step against ``N``.
 Run alone: ``python benchmarks/bench_5_isomp_vs_spherical_midpoint.py``.
 """
 
