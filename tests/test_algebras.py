@@ -62,6 +62,23 @@ def test_projection_is_idempotent_and_orthogonal(key: str, seed: int) -> None:
 
 @pytest.mark.parametrize("key", ALGEBRAS)
 @given(seed=seeds)
+def test_distance_and_norm_are_those_of_the_projection(key: str, seed: int) -> None:
+    """``distance(Y) = |Y - P(Y)|`` and ``norm(Y) = |Y|`` (Frobenius) for any ``Y``, whatever
+    arithmetic a space uses for them (the matrix spaces' one-temporary forms)."""
+    alg = ALGEBRAS[key]()
+    rng = np.random.default_rng(seed)
+    Y = rng.standard_normal((3, 2, *alg.shape))
+    if alg.is_complex:
+        Y = Y + 1j * rng.standard_normal((3, 2, *alg.shape))
+    R = (Y - alg.project(Y)).reshape(3, 2, -1)
+    want = np.sqrt(np.sum(np.abs(R) ** 2, axis=-1))
+    assert np.max(np.abs(alg.distance(Y) - want)) <= 1e-14 * np.max(np.abs(Y))
+    norm = np.sqrt(np.sum(np.abs(Y.reshape(3, 2, -1)) ** 2, axis=-1))
+    assert np.max(np.abs(alg.norm(Y) - norm)) <= 1e-14 * np.max(np.abs(Y))
+
+
+@pytest.mark.parametrize("key", ALGEBRAS)
+@given(seed=seeds)
 def test_coordinates_round_trip_and_membership(key: str, seed: int) -> None:
     alg = ALGEBRAS[key]()
     W = alg.random(seed, batch=(3,))

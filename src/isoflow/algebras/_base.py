@@ -363,6 +363,27 @@ class MatrixAlgebra(Algebra):
             P = P - tr[..., None, None] * np.eye(self.n, dtype=P.dtype)
         return P
 
+    def norm(self, W: Array) -> Array:
+        """Frobenius norm per member (:meth:`Algebra.norm`), summed without a temporary of
+        ``W``'s size."""
+        return np.sqrt(_sum_of_squares(np.asarray(W)))
+
+    def distance(self, W: Array) -> Array:
+        r"""Frobenius distance to ``V`` per member: the norm of ``W - P(W) = (W - sigma(W))/2``
+        (plus the trace part :math:`\operatorname{Tr}(P(W))/n\,I` where :attr:`traceless`),
+        with one temporary of ``W``'s size (this runs on every saved state of a run,
+        :func:`isoflow._stepping.stop_members_leaving_the_space`)."""
+        if type(self).project is not MatrixAlgebra.project:  # a space with its own projection
+            return super().distance(W)
+        Wa = np.asarray(W)
+        D = Wa - self.sigma(Wa)
+        D *= 0.5
+        if self.traceless:  # W - P = D + (Tr(W - D) / n) I
+            tr = (np.trace(Wa, axis1=-2, axis2=-1) - np.trace(D, axis1=-2, axis2=-1)) / self.n
+            idx = np.arange(self.n)
+            D[..., idx, idx] += tr[..., None]
+        return np.sqrt(_sum_of_squares(D))
+
     def bracket(self, A: Array, X: Array) -> Array:
         return A @ X - X @ A
 
@@ -462,3 +483,13 @@ class MatrixAlgebra(Algebra):
 
     #: Whether :meth:`casimirs` returns eigenvalues (normal matrices) or trace powers.
     casimirs_are_eigenvalues: bool = True
+
+
+def _sum_of_squares(M: Array) -> Array:
+    r""":math:`\sum_{ij} |M_{ij}|^2` over the last two axes (real arithmetic, no temporary of
+    ``M``'s size for a contiguous ``M``)."""
+    if M.dtype.kind == "c":
+        return _sum_of_squares(M.real) + _sum_of_squares(M.imag)
+    if M.dtype.kind != "f":
+        M = M.astype(np.float64)
+    return np.einsum("...ij,...ij->...", M, M)
