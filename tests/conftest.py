@@ -74,7 +74,6 @@ def _one_numba_thread_per_worker(request: pytest.FixtureRequest):  # type: ignor
     with thread_limits(blas=1, numba=1):
         yield
 
-
 settings.register_profile(
     "ci", max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow]
 )
