@@ -57,23 +57,6 @@ def pytest_configure(config: pytest.Config) -> None:
 
 _limits = threadpool_limits(limits=1)
 
-
-@pytest.fixture(autouse=True)
-def _one_numba_thread_per_worker(request: pytest.FixtureRequest):  # type: ignore[no-untyped-def]
-    """Under pytest-xdist every core already runs a worker: solves without ``threads=`` run
-    one numba thread, as ``threads=1`` would (the serial driver, no oversubscription, and one
-    compiled driver shared by more tests). Tests that ask for threads get them; tests of the
-    default policy itself are marked ``default_threads``."""
-    if not os.environ.get("PYTEST_XDIST_WORKER") or request.node.get_closest_marker(
-        "default_threads"
-    ):
-        yield
-        return
-    from isoflow.threads import thread_limits
-
-    with thread_limits(blas=1, numba=1):
-        yield
-
 settings.register_profile(
     "ci", max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow]
 )

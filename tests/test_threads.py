@@ -27,9 +27,6 @@ import isoflow as iso
 from isoflow import ParameterError
 from isoflow.threads import available_cores, plan_threads
 
-#: These tests are about the default thread policy itself: no pinning (tests/conftest.py).
-pytestmark = pytest.mark.default_threads
-
 HERE = Path(__file__).resolve().parent
 CORES = available_cores()
 two_cores = pytest.mark.skipif(CORES < 2, reason="needs 2 cores (one core: one thread anyway)")
