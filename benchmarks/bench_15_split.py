@@ -10,17 +10,21 @@ entries: in flops a small fraction of the two complex ``N x N`` products of each
 iterations. The iterations per step are reported too; the ratio per iteration is the cost of
 the split itself.
 
-Measured (N = 128, 256, machine shared): 1.13, 1.22, not met (1.27, 1.29 before the split
-step took IsoMP's real-plane specialization for large complex states, as the ideal step does).
-The rest is memory traffic,
-not arithmetic: a half step reads the folded per-diagonal matrices once, about ``N^3 / 12``
-doubles (11 MB at N = 256, 90 MB at 512, 0.7 GB at 1024), so one half step takes about as
-long as one complex product (4.0 ms against 3.1 ms at N = 256, 22 ms against 25 ms at 512),
-and a step has two of them against IsoMP's seven iterations of two products and a solve.
-Gathering the diagonals in cache-sized tiles instead of one strided entry at a time changed
-this by 0-8 % (the gather is a tenth of a half step). The known ways to 1.10: merge the two
+**Not met; how far and why.** Measured on the idle machine (2026-11-26, ``python
+benchmarks/run_all.py --only 3,15,16``): 1.50, 1.87, 2.04 at ``N = 256, 512, 1024`` (the same
+5, 3 and 2 iterations a step for both; 13, 85 and 457 ms a step for the two half steps). An
+earlier quick run (``N = 128, 256``, machine shared, cubic start) read 1.13 and 1.22: since
+IsoMP's start became quartic, the ideal step takes fewer iterations and the half steps weigh
+more. A half step reads the folded per-diagonal matrices once, about ``N^3 / 12`` doubles
+(11 MB at N = 256, 90 MB at 512, 0.7 GB at 1024), in packed symmetric products
+(``isoflow.sphere.compiled._symmetric_product``) that run at about 2.4 ns a stored entry
+(measured alone at ``k = 512``, in cache): about seven cycles an entry, scalar, well above the
+memory bound, so one half step at ``N = 1024`` costs about as much as an IsoMP iteration.
+Gathering the diagonals in cache-sized tiles changed this by 0-8 %. The known ways to 1.10:
+a product that vectorizes (its two reductions and two updates a row share their loads; a
+row-then-column split of the same product measured slower, 3.2 ns an entry), merging the two
 half steps of consecutive steps between saves (``S_{h/2} S_{h/2} = S_h``: half the traffic),
-or apply ``exp(-tau c(T_m))`` through the tridiagonal ``T_m`` of each diagonal (``O(N^2)``
+or applying ``exp(-tau c(T_m))`` through the tridiagonal ``T_m`` of each diagonal (``O(N^2)``
 per application, no stored matrices) where ``tau c`` is moderate.
 Target: time per step, split / ideal, at most 1.10. Run alone:
 ``python benchmarks/bench_15_split.py [--quick]``.
