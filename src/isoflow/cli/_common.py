@@ -157,7 +157,7 @@ def summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
     ]
     if sol.diagnostics is not None and sol.diagnostics.forced_or_dissipative:
         note = "forced or dissipative: Casimirs and energy change by design (drifts are changes)"
-        rows.insert(5, ("note", note))
+        rows.insert(len(rows) - len(d) - 1, ("note", note))  # just before the drifts
     if path is not None:
         rows.append(("file", path))
     return [title, *table(rows)]

@@ -219,7 +219,8 @@ def euler_sphere(
         ``omega = 0``) or ``"angular_momentum_z"`` (for ``omega != 0``); with dissipation or
         forcing these are ``observables`` instead (saved and drawn, no drift), with the
         spectra, the transfer and the budgets (:mod:`isoflow.models._forced`; with the
-        double bracket alone the invariants stay and the spectra are observables); and
+        double bracket alone the enstrophy stays an invariant, and the momentum and the
+        spectra are observables); and
         ``parameters``: ``N, omega, hbar, seed, initial`` (``"random"``, ``"coefficients"``,
         ``"function"`` or ``"matrix"``) and, for random data, ``lmin, lmax, slope, rms``.
     Q0 : ndarray, shape (*batch, N, N)
