@@ -91,6 +91,105 @@ def _record_failure(rec, k, code, its, r):  # type: ignore[no-untyped-def]
     rec[REC_FAIL_RESIDUAL] = r
 
 
+# The per-lane bookkeeping of a step, on the lanes' small arrays only: compiled once for every
+# layout, stage and field (the driver is compiled per run signature; keeping these out of its
+# body keeps that compilation short).
+@numba.njit(cache=True)
+def _alive_lanes(rec, m0, nv, alive):  # type: ignore[no-untyped-def]
+    """Mark the lanes whose members have not failed; their number."""
+    n = 0
+    for q in range(nv):
+        if rec[m0 + q, REC_FAIL_STEP] < 0:
+            alive[q] = True
+            n += 1
+    return n
+
+
+@numba.njit(cache=True)
+def _start_solve(scale2, solver, ok, tol, floor, prev, first, code, res, its_p, going):  # type: ignore[no-untyped-def]
+    """Each lane's tolerances from the scale of its state, and a fresh solve."""
+    for q in range(scale2.shape[0]):
+        sc = math.sqrt(scale2[q])
+        tol[q] = solver.atol + solver.rtol * sc
+        floor[q] = solver.stall_rtol * sc
+        prev[q] = math.inf
+        first[q] = math.inf
+        code[q] = STATUS_MAX_ITER
+        res[q] = math.inf
+        its_p[q] = 0
+        going[q] = ok[q]
+
+
+@numba.njit(cache=True)
+def _check_lanes(rr, it, going, res, its_p, prev, first, code, tol, floor, divergence_factor):  # type: ignore[no-untyped-def]
+    """The stopping rule for every lane still iterating; whether any goes on."""
+    more = False
+    for q in range(rr.shape[0]):
+        if going[q]:
+            r = math.sqrt(rr[q])
+            res[q] = r
+            its_p[q] = it
+            c, prev[q], first[q] = stopping_step(
+                r, prev[q], first[q], it, tol[q], floor[q], divergence_factor
+            )
+            if c != CONTINUE:
+                code[q] = c
+                going[q] = False
+            else:
+                more = True
+    return more
+
+
+@numba.njit(cache=True)
+def _judge_lanes(ok, its, its_p, code, fin, res, fail_code, fail_res, res_max):  # type: ignore[no-untyped-def]
+    """After a substep's finish: lanes whose solve failed or whose state is not finite stop
+    being ``ok``; the number of such lanes."""
+    n_failed = 0
+    for q in range(ok.shape[0]):
+        if not ok[q]:
+            continue
+        its[q] += its_p[q]
+        if code[q] != STATUS_CONVERGED or not fin[q]:
+            ok[q] = False
+            n_failed += 1
+            fail_code[q] = code[q] if code[q] != STATUS_CONVERGED else STATUS_NON_FINITE
+            fail_res[q] = res[q]
+        elif res[q] > res_max[q]:
+            res_max[q] = res[q]
+    return n_failed
+
+
+@numba.njit(cache=True)
+def _close_step(alive, ok, its, it_tot, it_max, restore, fail_code, fail_res, rec, m0, k):  # type: ignore[no-untyped-def]
+    """End of step ``k``: count iterations, freeze the lanes that failed (``restore``) and
+    record why; the number frozen now."""
+    n_failed = 0
+    for q in range(alive.shape[0]):
+        failed = alive[q] and not ok[q]
+        restore[q] = failed
+        if not alive[q]:
+            continue
+        it_tot[q] += its[q]
+        if its[q] > it_max[q]:
+            it_max[q] = its[q]
+        if failed:  # frozen at the state before this step
+            alive[q] = False
+            n_failed += 1
+            _record_failure(rec[m0 + q], k, fail_code[q], its[q], fail_res[q])
+    return n_failed
+
+
+@numba.njit(cache=True)
+def _close_call(rec, m0, nv, it_tot, it_max, res_max):  # type: ignore[no-untyped-def]
+    """The call's totals into the members' records, marked done."""
+    for q in range(nv):
+        m = m0 + q
+        rec[m, REC_ITERATIONS] += it_tot[q]
+        rec[m, REC_ITERATIONS_MAX] = max(rec[m, REC_ITERATIONS_MAX], it_max[q])
+        rec[m, REC_RESIDUAL_MAX] = max(rec[m, REC_RESIDUAL_MAX], res_max[q])
+        rec[m, REC_CALL_DONE] = 1.0
+
+
 @numba.njit(cache=True)
 def run_unit(  # type: ignore[no-untyped-def]
     begin, iterate, finish, f, fargs, lay, mp, nwork,
@@ -113,11 +212,7 @@ def run_unit(  # type: ignore[no-untyped-def]
     k_final = plan.k_final
     mem = solver.anderson
     alive = np.zeros(L, dtype=np.bool_)
-    n_alive = 0
-    for q in range(nv):
-        if rec[m0 + q, REC_FAIL_STEP] < 0:
-            alive[q] = True
-            n_alive += 1
+    n_alive = _alive_lanes(rec, m0, nv, alive)
     row = 0
     if n_alive == 0:  # frozen earlier: the saved rows repeat the last good states
         for step in range(plan.nsteps):
@@ -199,32 +294,13 @@ def run_unit(  # type: ignore[no-untyped-def]
                 begin(f, fargs, lay, mp, sd, Wcur, hp)
             guess(Wcur, ring[p], head[p], nh[p], coefs, X)
             blocks.lane_sumsq(lay, Wcur, scale2)
-            for q in range(L):
-                sc = math.sqrt(scale2[q])
-                tol[q] = solver.atol + solver.rtol * sc
-                floor[q] = solver.stall_rtol * sc
-                prev[q] = math.inf
-                first[q] = math.inf
-                code[q] = STATUS_MAX_ITER
-                res[q] = math.inf
-                its_p[q] = 0
-                going[q] = ok[q]
+            _start_solve(scale2, solver, ok, tol, floor, prev, first, code, res, its_p, going)
             for it in range(1, solver.max_iter + 1):
                 iterate(f, fargs, lay, mp, sd, Wcur, X, G, aux, work, hp, rr)
-                more = False
-                for q in range(L):
-                    if going[q]:
-                        r = math.sqrt(rr[q])
-                        res[q] = r
-                        its_p[q] = it
-                        c, prev[q], first[q] = stopping_step(
-                            r, prev[q], first[q], it, tol[q], floor[q], solver.divergence_factor
-                        )
-                        if c != CONTINUE:
-                            code[q] = c
-                            going[q] = False
-                        else:
-                            more = True
+                more = _check_lanes(
+                    rr, it, going, res, its_p, prev, first, code, tol, floor,
+                    solver.divergence_factor,
+                )  # fmt: skip
                 if not more:
                     break
                 if mem > 0:  # one lane per unit (the runner's rule)
@@ -235,17 +311,7 @@ def run_unit(  # type: ignore[no-untyped-def]
                 else:
                     blocks.select_lanes(lay, X, G, going)
             finish(f, fargs, lay, mp, sd, Wcur, X, aux, work, hp, comp[p], Wn, fin)
-            for q in range(L):
-                if not ok[q]:
-                    continue
-                its[q] += its_p[q]
-                if code[q] != STATUS_CONVERGED or not fin[q]:
-                    ok[q] = False
-                    n_ok -= 1
-                    fail_code[q] = code[q] if code[q] != STATUS_CONVERGED else STATUS_NON_FINITE
-                    fail_res[q] = res[q]
-                elif res[q] > res_max[q]:
-                    res_max[q] = res[q]
+            n_ok -= _judge_lanes(ok, its, its_p, code, fin, res, fail_code, fail_res, res_max)
             if n_ok == 0:
                 break
             if plan.kmax > 0:
@@ -260,20 +326,11 @@ def run_unit(  # type: ignore[no-untyped-def]
             elif ok[0]:
                 Wcur, Wn = Wn, Wcur
                 swapped = not swapped
-        failed_now = False
-        for q in range(L):
-            failed = alive[q] and not ok[q]
-            restore[q] = failed
-            if not alive[q]:
-                continue
-            it_tot[q] += its[q]
-            if its[q] > it_max[q]:
-                it_max[q] = its[q]
-            if failed:  # frozen at the state before this step
-                alive[q] = False
-                n_alive -= 1
-                failed_now = True
-                _record_failure(rec[m0 + q], k, fail_code[q], its[q], fail_res[q])
+        n_failed = _close_step(
+            alive, ok, its, it_tot, it_max, restore, fail_code, fail_res, rec, m0, k
+        )
+        n_alive -= n_failed
+        failed_now = n_failed > 0
         if failed_now and keep_start:  # earlier substeps or a half step changed it: undo them
             blocks.commit_lanes(lay, Wcur, Wstart, restore)
         if failed_now and compensated:  # and the compensations the step changed
@@ -297,12 +354,7 @@ def run_unit(  # type: ignore[no-untyped-def]
             break
     if swapped:  # the state is in the second buffer
         copy(W, Wcur)
-    for q in range(nv):
-        m = m0 + q
-        rec[m, REC_ITERATIONS] += it_tot[q]
-        rec[m, REC_ITERATIONS_MAX] = max(rec[m, REC_ITERATIONS_MAX], it_max[q])
-        rec[m, REC_RESIDUAL_MAX] = max(rec[m, REC_RESIDUAL_MAX], res_max[q])
-        rec[m, REC_CALL_DONE] = 1.0
+    _close_call(rec, m0, nv, it_tot, it_max, res_max)
 
 
 # The drivers are compiled per run signature by :func:`isoflow._compiled.signatures.
