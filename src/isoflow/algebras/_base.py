@@ -343,6 +343,9 @@ class MatrixAlgebra(Algebra):
     traceless: bool = False
     #: Whether ``XB = -sigma(BX)`` holds for the normalizer, enabling the one-product bracket.
     structured: bool = True
+    #: ``s`` where ``sigma(Y) = s conj(Y)^T`` (``None``: another involution); such spaces get
+    #: the compiled :meth:`distance` for large arrays.
+    transpose_sign: int | None = None
 
     def __init__(self, n: int, dtype: Any, name: str) -> None:
         if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
@@ -376,6 +379,17 @@ class MatrixAlgebra(Algebra):
         if type(self).project is not MatrixAlgebra.project:  # a space with its own projection
             return super().distance(W)
         Wa = np.asarray(W)
+        if (
+            self.transpose_sign is not None
+            and Wa.size >= _COMPILED_DISTANCE_SIZE
+            and Wa.dtype in (np.float64, np.complex128)
+        ):
+            from .._distance_compiled import distances
+
+            flat = np.ascontiguousarray(Wa).reshape(-1, self.n, self.n)
+            out = np.empty(flat.shape[0])
+            distances(flat, float(self.transpose_sign), self.traceless, out)
+            return out.reshape(Wa.shape[:-2])
         D = Wa - self.sigma(Wa)
         D *= 0.5
         if self.traceless:  # W - P = D + (Tr(W - D) / n) I
@@ -483,6 +497,11 @@ class MatrixAlgebra(Algebra):
 
     #: Whether :meth:`casimirs` returns eigenvalues (normal matrices) or trace powers.
     casimirs_are_eigenvalues: bool = True
+
+
+#: Entries from which :meth:`MatrixAlgebra.distance` runs compiled (below, NumPy: no compilation
+#: for the small checks of a run's start).
+_COMPILED_DISTANCE_SIZE = 1 << 16
 
 
 def _sum_of_squares(M: Array) -> Array:

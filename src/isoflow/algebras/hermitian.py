@@ -28,6 +28,8 @@ class Hermitian(MatrixAlgebra):
     def normalizer(self) -> Unitary:
         return Unitary(self.n)
 
+    transpose_sign = 1
+
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
         return np.conj(np.swapaxes(Y, -1, -2))
 

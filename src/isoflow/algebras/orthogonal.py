@@ -28,6 +28,8 @@ class SpecialOrthogonal(MatrixAlgebra):
     def normalizer(self) -> SpecialOrthogonal:
         return self
 
+    transpose_sign = -1
+
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
         return -np.swapaxes(Y, -1, -2)
 

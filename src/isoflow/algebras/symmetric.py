@@ -28,6 +28,8 @@ class Symmetric(MatrixAlgebra):
     def normalizer(self) -> SpecialOrthogonal:
         return SpecialOrthogonal(self.n)
 
+    transpose_sign = 1
+
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
         return np.swapaxes(Y, -1, -2)
 

@@ -27,6 +27,8 @@ class Unitary(MatrixAlgebra):
     def normalizer(self) -> Unitary:
         return self
 
+    transpose_sign = -1
+
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
         return -np.conj(np.swapaxes(Y, -1, -2))
 
