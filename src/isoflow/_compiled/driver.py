@@ -91,35 +91,9 @@ def _record_failure(rec, k, code, its, r):  # type: ignore[no-untyped-def]
     rec[REC_FAIL_RESIDUAL] = r
 
 
-# The per-lane bookkeeping of a step, on the lanes' small arrays only: compiled once for every
-# layout, stage and field (the driver is compiled per run signature; keeping these out of its
-# body keeps that compilation short).
-@numba.njit(cache=True)
-def _alive_lanes(rec, m0, nv, alive):  # type: ignore[no-untyped-def]
-    """Mark the lanes whose members have not failed; their number."""
-    n = 0
-    for q in range(nv):
-        if rec[m0 + q, REC_FAIL_STEP] < 0:
-            alive[q] = True
-            n += 1
-    return n
-
-
-@numba.njit(cache=True)
-def _start_solve(scale2, solver, ok, tol, floor, prev, first, code, res, its_p, going):  # type: ignore[no-untyped-def]
-    """Each lane's tolerances from the scale of its state, and a fresh solve."""
-    for q in range(scale2.shape[0]):
-        sc = math.sqrt(scale2[q])
-        tol[q] = solver.atol + solver.rtol * sc
-        floor[q] = solver.stall_rtol * sc
-        prev[q] = math.inf
-        first[q] = math.inf
-        code[q] = STATUS_MAX_ITER
-        res[q] = math.inf
-        its_p[q] = 0
-        going[q] = ok[q]
-
-
+# The heavier per-lane bookkeeping of a step (the stopping rule, failures), on the lanes' small
+# arrays only: compiled once for every layout, stage and field (the driver is compiled per run
+# signature; keeping these out of its body keeps that compilation shorter).
 @numba.njit(cache=True)
 def _check_lanes(rr, it, going, res, its_p, prev, first, code, tol, floor, divergence_factor):  # type: ignore[no-untyped-def]
     """The stopping rule for every lane still iterating; whether any goes on."""
@@ -180,17 +154,6 @@ def _close_step(alive, ok, its, it_tot, it_max, restore, fail_code, fail_res, re
 
 
 @numba.njit(cache=True)
-def _close_call(rec, m0, nv, it_tot, it_max, res_max):  # type: ignore[no-untyped-def]
-    """The call's totals into the members' records, marked done."""
-    for q in range(nv):
-        m = m0 + q
-        rec[m, REC_ITERATIONS] += it_tot[q]
-        rec[m, REC_ITERATIONS_MAX] = max(rec[m, REC_ITERATIONS_MAX], it_max[q])
-        rec[m, REC_RESIDUAL_MAX] = max(rec[m, REC_RESIDUAL_MAX], res_max[q])
-        rec[m, REC_CALL_DONE] = 1.0
-
-
-@numba.njit(cache=True)
 def run_unit(  # type: ignore[no-untyped-def]
     begin, iterate, finish, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, m0,
@@ -212,7 +175,11 @@ def run_unit(  # type: ignore[no-untyped-def]
     k_final = plan.k_final
     mem = solver.anderson
     alive = np.zeros(L, dtype=np.bool_)
-    n_alive = _alive_lanes(rec, m0, nv, alive)
+    n_alive = 0
+    for q in range(nv):
+        if rec[m0 + q, REC_FAIL_STEP] < 0:
+            alive[q] = True
+            n_alive += 1
     row = 0
     if n_alive == 0:  # frozen earlier: the saved rows repeat the last good states
         for step in range(plan.nsteps):
@@ -294,7 +261,16 @@ def run_unit(  # type: ignore[no-untyped-def]
                 begin(f, fargs, lay, mp, sd, Wcur, hp)
             guess(Wcur, ring[p], head[p], nh[p], coefs, X)
             blocks.lane_sumsq(lay, Wcur, scale2)
-            _start_solve(scale2, solver, ok, tol, floor, prev, first, code, res, its_p, going)
+            for q in range(L):
+                sc = math.sqrt(scale2[q])
+                tol[q] = solver.atol + solver.rtol * sc
+                floor[q] = solver.stall_rtol * sc
+                prev[q] = math.inf
+                first[q] = math.inf
+                code[q] = STATUS_MAX_ITER
+                res[q] = math.inf
+                its_p[q] = 0
+                going[q] = ok[q]
             for it in range(1, solver.max_iter + 1):
                 iterate(f, fargs, lay, mp, sd, Wcur, X, G, aux, work, hp, rr)
                 more = _check_lanes(
@@ -354,7 +330,12 @@ def run_unit(  # type: ignore[no-untyped-def]
             break
     if swapped:  # the state is in the second buffer
         copy(W, Wcur)
-    _close_call(rec, m0, nv, it_tot, it_max, res_max)
+    for q in range(nv):
+        m = m0 + q
+        rec[m, REC_ITERATIONS] += it_tot[q]
+        rec[m, REC_ITERATIONS_MAX] = max(rec[m, REC_ITERATIONS_MAX], it_max[q])
+        rec[m, REC_RESIDUAL_MAX] = max(rec[m, REC_RESIDUAL_MAX], res_max[q])
+        rec[m, REC_CALL_DONE] = 1.0
 
 
 # The drivers are compiled per run signature by :func:`isoflow._compiled.signatures.
