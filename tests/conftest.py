@@ -132,7 +132,7 @@ SLOW = (
     "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[su(17) x| su(17)*",
     "tests/test_resume.py::test_sigkill_then_resume_is_bit_for_bit",
     "tests/test_forced.py::test_split_step_on_the_planar_layout_matches_the_numpy_path",
-    # measured from a fresh clone with a compile recorder (2026-11-27): the first run of a
+    # measured from a fresh clone with a compile recorder (2026-11-26): the first run of a
     # driver signature (layout x stage x field x dtype, serial or parallel) compiles for
     # 10-16 s. Each case below was the only default-run user of its signature (or of the
     # complex BLAS family's), and its property keeps a case in the default run: the NumPy
