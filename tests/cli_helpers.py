@@ -1,13 +1,18 @@
-"""Running the ``isoflow`` command in a subprocess, shared by the command-line tests."""
+"""Running the ``isoflow`` command, shared by the command-line tests: in a subprocess (what a
+user runs; needed to kill it, to see its exit by a signal or its own environment) or in this
+process (:func:`run_cli_here`, the same entry point without a new interpreter: for the many
+one-line-error checks, about a second each as subprocesses)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
 import subprocess
 import sys
 import time
+from io import StringIO
 from pathlib import Path
 
 TESTS = Path(__file__).resolve().parent
@@ -34,6 +39,33 @@ def run_cli(
         isoflow_cmd(*args), capture_output=True, text=True, timeout=timeout, check=False,
         cwd=cwd, env=env,
     )  # fmt: skip
+
+
+def run_cli_here(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    """Run ``isoflow ARGS`` in this process through :func:`isoflow.cli.main` (what the
+    ``isoflow`` script calls), capturing its output; a result like :func:`run_cli`'s.
+
+    For commands that end before computing anything (argument and file mistakes): the
+    working directory is changed for the call and restored. ``test_cli_run.py`` checks that
+    it gives the installed command's exit status and error line.
+    """
+    from isoflow.cli import main
+
+    out, err = StringIO(), StringIO()
+    here = os.getcwd()
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(list(args))
+            except SystemExit as stop:  # argparse's mistakes (status 2), --help, --version
+                code = stop.code if isinstance(stop.code, int) else 1
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(
+        ["isoflow", *args], code, stdout=out.getvalue(), stderr=err.getvalue()
+    )
 
 
 def kill_when(path: Path, min_rows: int, proc: subprocess.Popen) -> int:

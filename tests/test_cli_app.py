@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cli_helpers import one_error_line, run_cli
+from cli_helpers import one_error_line, run_cli, run_cli_here
 from isoflow import cli, registry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,7 +46,7 @@ def toml_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     ],
 )
 def test_toml_mistakes_are_one_line_errors(toml_dir: Path, name: str, pattern: str) -> None:
-    res = run_cli("run", "--config", f"{name}.toml", "--quiet", cwd=toml_dir)
+    res = run_cli_here("run", "--config", f"{name}.toml", "--quiet", cwd=toml_dir)
     assert res.returncode == 1, res.stderr
     assert re.search(pattern, one_error_line(res.stderr)), res.stderr
     assert not (toml_dir / "x.h5").exists()
@@ -180,7 +180,7 @@ def test_parser_names_come_from_the_registry() -> None:
     ],
 )
 def test_bench_mistakes_are_one_line_errors(args: list[str], pattern: str) -> None:
-    res = run_cli("bench", *args)
+    res = run_cli("bench", *args)  # the suite runs in a subprocess of its own
     assert res.returncode == 2, res.stderr
     assert re.search(pattern, one_error_line(res.stderr)), res.stderr
 

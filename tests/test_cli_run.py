@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cli_helpers import run_cli as _run
+from cli_helpers import run_cli_here
 from isoflow import io
 
 
@@ -159,9 +160,30 @@ def mistakes_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 )
 def test_user_mistakes(mistakes_dir: Path, args: list[str], code: int, pattern: str) -> None:
     tmp_path = mistakes_dir
-    res = _run(*args, cwd=tmp_path)
+    res = run_cli_here(*args, cwd=tmp_path)
     assert res.returncode == code, res.stderr
     assert "Traceback" not in res.stderr
     assert re.search(pattern, res.stderr), res.stderr
     lines = [ln for ln in res.stderr.strip().splitlines() if ln.startswith("isoflow")]
     assert len(lines) == 1 and "error" in lines[0]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["run", "pendulum", "--dt", "0.1", "--t1", "1", "--out", "x.h5"],
+        ["run", "rigid-body", "--dt", "0.1", "--t1", "1", "--out", "x.h5", "--frob", "1"],
+        ["info", "cut.h5"],
+    ],
+)
+def test_the_installed_command_says_what_the_in_process_entry_point_says(
+    mistakes_dir: Path, args: list[str]
+) -> None:
+    """The mistakes above run in this process (:func:`cli_helpers.run_cli_here`); the
+    ``isoflow`` script gives the same exit status and the same stderr."""
+    here = run_cli_here(*args, cwd=mistakes_dir)
+    script = _run(*args, cwd=mistakes_dir)
+    assert (script.returncode, script.stderr) == (here.returncode, here.stderr)
+    assert here.returncode in (1, 2) and here.stderr.startswith(
+        "usage: " if here.returncode == 2 else "isoflow: error:"
+    )

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_helpers import isoflow_cmd, kill_when, one_error_line, run_cli, user_env
+from cli_helpers import isoflow_cmd, kill_when, one_error_line, run_cli, run_cli_here, user_env
 from helpers import disk_before_each_write, write_user_model
 from isoflow import cli, io, registry
 
@@ -112,8 +112,8 @@ def test_user_compiled_model_from_toml(tmp_path: Path) -> None:
     ],
 )
 def test_user_model_mistakes_are_one_line_errors(tmp_path: Path, args, pattern) -> None:
-    res = run_cli("run", *args, "--dt", "0.1", "--n-steps", "2", "--out", "x.h5", "--quiet",
-                  cwd=tmp_path, env=user_env())  # fmt: skip
+    res = run_cli_here("run", *args, "--dt", "0.1", "--n-steps", "2", "--out", "x.h5",
+                       "--quiet", cwd=tmp_path)  # fmt: skip
     assert res.returncode == 1, res.stderr
     assert re.search(pattern, one_error_line(res.stderr)), res.stderr
     assert not (tmp_path / "x.h5").exists()

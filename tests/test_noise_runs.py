@@ -13,7 +13,7 @@ import pytest
 import isoflow as iso
 from cli_helpers import isoflow_cmd as _cmd
 from cli_helpers import kill_when as _kill_when
-from cli_helpers import one_error_line, run_cli
+from cli_helpers import one_error_line, run_cli_here
 from isoflow import io
 
 ARGS = [
@@ -77,8 +77,8 @@ def test_the_tasks_of_a_sweep_draw_what_one_ensemble_of_its_members_draws(tmp_pa
 def test_noise_mistakes_on_the_command_line_are_one_line_errors(
     tmp_path: Path, args: list[str], message: str
 ) -> None:
-    res = run_cli("run", "rigid-body", "--n", "3", *args, "--dt", "0.1", "--n-steps", "2",
-                  "--out", "x.h5", "--quiet", cwd=tmp_path)  # fmt: skip
+    res = run_cli_here("run", "rigid-body", "--n", "3", *args, "--dt", "0.1", "--n-steps",
+                       "2", "--out", "x.h5", "--quiet", cwd=tmp_path)  # fmt: skip
     assert res.returncode == 1
     assert re.search(message, one_error_line(res.stderr)), res.stderr
     assert not (tmp_path / "x.h5").exists()
