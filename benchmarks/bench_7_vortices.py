@@ -139,7 +139,7 @@ def _stage_loop(runner: Any, args: tuple[Any, ...]) -> Any:
 
     dt = DriverTypes(runner.f, runner.fargs, runner.layout.record, runner.mp, runner.W.dtype,
                      len(runner.core))  # fmt: skip
-    dt.compile_stage(runner.begin, runner.impl.iterate, runner.impl.finish)
+    dt.compile_stage(runner.begin, runner.impl.iterate, runner.impl.finish, runner.mix)
     sig = types.none(dt.iterate, dt.finish, dt.f, dt.fargs,
                      *(numba.typeof(a) for a in args[4:]), types.int64)  # fmt: skip
     return numba.njit(sig)(_stage_loop_py)

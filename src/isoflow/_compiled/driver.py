@@ -20,7 +20,9 @@ output (``iterate``) and the new state (``finish``). Everything else exists here
   the position's last addition left, handed to ``finish``; an empty buffer for a method that
   does not compensate, see :mod:`isoflow.methods.isomp`);
 * the stopping rules of :mod:`isoflow.nonlinear` (a numba compilation of the same function),
-  per lane, and Anderson mixing (one lane per unit);
+  per lane, and Anderson mixing (one lane per unit; ``mix``, :func:`~isoflow._compiled.flat.
+  anderson`, passed like the stage functions so that a driver neither compiles nor
+  re-optimizes it when the run does not mix, see :mod:`isoflow._compiled.signatures`);
 * failure bookkeeping: a member whose solve fails (or whose state turns non-finite) is frozen
   at its last good state, and its record says at which step, why, after how many iterations
   and with which residual; the other members go on;
@@ -43,7 +45,7 @@ import numba
 import numpy as np
 
 from . import blocks
-from .flat import anderson, copy, guess, push
+from .flat import copy, guess, push
 from .rules import CONTINUE, STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE, stopping_step
 
 __all__ = [
@@ -153,9 +155,9 @@ def _close_step(alive, ok, its, it_tot, it_max, restore, fail_code, fail_res, re
     return n_failed
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def run_unit(  # type: ignore[no-untyped-def]
-    begin, iterate, finish, f, fargs, lay, mp, nwork,
+    begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, m0,
 ):  # fmt: skip
     """Advance one unit (flat state ``W``, its ``ring`` ``(P, K, S)``, ``head``/``nh``
@@ -280,8 +282,8 @@ def run_unit(  # type: ignore[no-untyped-def]
                 if not more:
                     break
                 if mem > 0:  # one lane per unit (the runner's rule)
-                    anderson(it, X, G, dF, dG, gram, fprev, gprev, fcur, gamma,
-                             solver.regularization)  # fmt: skip
+                    mix(it, X, G, dF, dG, gram, fprev, gprev, fcur, gamma,
+                        solver.regularization)  # fmt: skip
                 elif L == 1:
                     X, G = G, X
                 else:
@@ -344,26 +346,26 @@ def run_unit(  # type: ignore[no-untyped-def]
 # bytecode only (not by ``parallel=``), so one body compiled twice with ``cache=True`` would
 # share a cache entry and one variant could load the other.
 def drive_serial(  # type: ignore[no-untyped-def]
-    begin, iterate, finish, f, fargs, lay, mp, nwork,
+    begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec,
 ):  # fmt: skip
     """:func:`run_unit` for every unit ``u`` of ``W`` (``(U, S)``), one after another."""
     L = blocks.lanes(lay)
     for u in range(W.shape[0]):
         run_unit(
-            begin, iterate, finish, f, fargs, lay, mp, nwork, W[u], ring[u], head[u], nh[u],
-            comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
+            begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
+            nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
         )  # fmt: skip
 
 
 def drive_parallel(  # type: ignore[no-untyped-def]
-    begin, iterate, finish, f, fargs, lay, mp, nwork,
+    begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec,
 ):  # fmt: skip
     """:func:`run_unit` for every unit of ``W``, units over numba threads."""
     L = blocks.lanes(lay)
     for u in numba.prange(W.shape[0]):
         run_unit(
-            begin, iterate, finish, f, fargs, lay, mp, nwork, W[u], ring[u], head[u], nh[u],
-            comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
+            begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
+            nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
         )  # fmt: skip

@@ -22,7 +22,17 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["anderson", "copy", "guess", "push", "rdot", "sumsq", "sumsq_diff", "two_sum"]
+__all__ = [
+    "anderson",
+    "copy",
+    "guess",
+    "no_mixing",
+    "push",
+    "rdot",
+    "sumsq",
+    "sumsq_diff",
+    "two_sum",
+]
 
 #: Reassociation for the reductions only (sums of squares, inner products).
 _REDUCE = {"reassoc", "nsz", "contract"}
@@ -180,6 +190,12 @@ def _solve_small(A, b, k, x):  # type: ignore[no-untyped-def]
         for j in range(i + 1, k):
             acc -= M[i, j] * x[j]
         x[i] = acc / M[i, i]
+
+
+@numba.njit(cache=True)
+def no_mixing(it, X, G, dF, dG, gram, fprev, gprev, fcur, gamma, reg):  # type: ignore[no-untyped-def]
+    """:func:`anderson`'s place in the driver of a run without Anderson mixing (never called:
+    the driver calls it only with a memory)."""
 
 
 @numba.njit(cache=True)

@@ -36,6 +36,7 @@ from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
 from . import driver
 from .dense import DenseBlas, dense_layout
+from .flat import anderson, no_mixing
 from .lanes import lanes_layout
 from .layout import Layout
 from .pairs import PairsBlas, pair_layout
@@ -185,6 +186,7 @@ class CompiledRunner(Runner):
         )
         self.checkpoints_at_saves = layout.restart_at_saves  # see Layout.restart_at_saves
         self.begin = impl.begin if impl.begin is not None else no_begin
+        self.mix = anderson if self.solver.anderson > 0 else no_mixing
         self.parallel = self.U >= 2 and _threads() > 1 and self._threads_allowed()
         self._drive: Any = None
 
@@ -305,9 +307,9 @@ class CompiledRunner(Runner):
         dt = DriverTypes(
             self.f, self.fargs, self.layout.record, self.mp, self.W.dtype, len(self.core)
         )
-        dt.compile_stage(self.begin, impl.iterate, impl.finish)
+        dt.compile_stage(self.begin, impl.iterate, impl.finish, self.mix)
         par = self.parallel if parallel is None else parallel
-        return compiled_driver(dt.driver_signature(args), par)
+        return compiled_driver(dt.driver_signature(args), par, units=args[3].shape[0])
 
     def advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         if not self.layout.restart_at_saves:
@@ -368,8 +370,8 @@ class CompiledRunner(Runner):
         return max(1, self.U // (16 * _threads()))
 
     def _head(self) -> tuple[Any, ...]:
-        """The driver's first arguments: the stage's functions and the field."""
-        return (self.begin, self.impl.iterate, self.impl.finish, self.f, self.fargs)
+        """The driver's first arguments: the stage's functions, the mixing and the field."""
+        return (self.begin, self.impl.iterate, self.impl.finish, self.mix, self.f, self.fargs)
 
     def _call(self, args: tuple[Any, ...]) -> None:
         """Run the compiled driver on ``args``; the first call gets it from :meth:`_driver`

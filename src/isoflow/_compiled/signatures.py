@@ -7,6 +7,17 @@ one compilation per machine serves every later process and every field of the sa
 (see :mod:`isoflow._kernel_fields` for why dispatcher arguments would not do). The types of the
 records, the layout record and the arrays are read off the values themselves
 (``numba.typeof``), so nothing here restates the driver's parameter list.
+
+Anderson mixing is passed the same way (``mix``: :func:`~isoflow._compiled.flat.anderson`, or
+:func:`~isoflow._compiled.flat.no_mixing` for a run without it): a function the driver calls
+directly is compiled into every driver again (numba links its code into the driver's and
+optimizes the whole), and Anderson's took about 1 s of each driver's compilation and 4 s of
+the first one's (measured, 2026-11-26), for the few runs that mix.
+
+A serial run of one unit (a single system, one member of :meth:`~isoflow._compiled.runner.
+CompiledRunner._isolate`) calls :func:`~isoflow._compiled.driver.run_unit` itself
+(:class:`OneUnit`): compiling the loop over units around it costs another 2-3 s of
+optimization of the whole, for a loop of one.
 """
 
 from __future__ import annotations
@@ -20,7 +31,7 @@ from numba import types
 from .._kernel_fields import field_type
 from . import driver
 
-__all__ = ["DriverTypes", "compiled_driver"]
+__all__ = ["DriverTypes", "OneUnit", "compiled_driver"]
 
 
 class DriverTypes:
@@ -53,33 +64,77 @@ class DriverTypes:
         self.begin = types.FunctionType(types.none(*head, A1, f8))
         self.iterate = types.FunctionType(types.none(*head, A1, A1, A1, A1, A2, f8, F1))
         self.finish = types.FunctionType(types.none(*head, A1, A1, A1, A2, f8, A1, A1, B1))
+        F2 = types.Array(types.float64, 2, "C")
+        I8 = types.int64
+        self.mix = types.FunctionType(types.none(I8, A1, A1, A2, A2, F2, A1, A1, A1, F1, f8))
 
-    def compile_stage(self, begin: Any, iterate: Any, finish: Any) -> None:
-        """Compile the stage functions for these types (loaded from the cache when there)."""
+    def compile_stage(self, begin: Any, iterate: Any, finish: Any, mix: Any) -> None:
+        """Compile the stage functions and the mixing for these types (loaded from the cache
+        when there)."""
         begin.compile(self.begin.signature)
         iterate.compile(self.iterate.signature)
         finish.compile(self.finish.signature)
+        mix.compile(self.mix.signature)
 
     def driver_signature(self, args: tuple[Any, ...]) -> Any:
         """The signature of :func:`~isoflow._compiled.driver.drive_serial` for the call
-        ``drive(begin, iterate, finish, f, fargs, *args)``."""
+        ``drive(begin, iterate, finish, mix, f, fargs, *args)``."""
         return types.none(
-            self.begin, self.iterate, self.finish, self.f, self.fargs,
+            self.begin, self.iterate, self.finish, self.mix, self.f, self.fargs,
             *(numba.typeof(a) for a in args),
         )  # fmt: skip
 
 
 _DRIVERS: dict[Any, Any] = {}
+_UNIT_LOOPS: dict[Any, Any] = {}
 
 
-def compiled_driver(signature: Any, parallel: bool) -> Any:
-    """The driver compiled for ``signature`` (serial, or units over numba threads)."""
+def compiled_driver(signature: Any, parallel: bool, units: int = 0) -> Any:
+    """The driver compiled for ``signature`` (serial, or units over numba threads); a serial
+    call of one unit (``units == 1``) gets :class:`OneUnit`, which calls the same way."""
+    if units == 1 and not parallel:
+        return OneUnit.of(signature)
     key = (signature, parallel)
     d = _DRIVERS.get(key)
     if d is None:
         py = driver.drive_parallel if parallel else driver.drive_serial
         d = _DRIVERS[key] = numba.njit(signature, cache=True, parallel=parallel, nogil=True)(py)
     return d
+
+
+class OneUnit:
+    """:func:`~isoflow._compiled.driver.drive_serial`'s call for arrays of one unit, made by
+    calling :func:`~isoflow._compiled.driver.run_unit` on the unit's views (the same compiled
+    step, without the loop over units to compile; see the module docstring).
+
+    ``run_unit`` is compiled with the flags of its decorator (``nogil``): numba's on-disk
+    cache does not key an entry by its flags, and the drivers' calls of ``run_unit`` share its
+    entries.
+    """
+
+    def __init__(self, unit: Any) -> None:
+        self.unit = unit
+
+    @classmethod
+    def of(cls, signature: Any) -> OneUnit:
+        """The call for the driver signature ``signature`` (its arrays with the unit axis)."""
+        d = _UNIT_LOOPS.get(signature)
+        if d is None:
+            head, (W, ring, heads, nh, comp), tail = (
+                signature.args[:9],
+                signature.args[9:14],
+                signature.args[14:],
+            )
+            one = tuple(a.copy(ndim=a.ndim - 1) for a in (W, ring, heads, nh, comp))
+            sig = types.none(*head, *one, *tail, types.int64)
+            d = _UNIT_LOOPS[signature] = numba.njit(sig, cache=True, nogil=True)(
+                driver.run_unit.py_func
+            )
+        return cls(d)
+
+    def __call__(self, *args: Any) -> None:
+        head, (W, ring, heads, nh, comp), tail = args[:9], args[9:14], args[14:]
+        self.unit(*head, W[0], ring[0], heads[0], nh[0], comp[0], *tail, 0)
 
 
 @numba.njit(cache=True)
