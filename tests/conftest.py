@@ -70,6 +70,8 @@ settings.load_profile("ci")
 #: the toy method, one compiled case per layout family, the experiments' figures).
 SLOW = (
     "tests/test_experiments.py::",
+    # two fresh processes compiling the dense BLAS loops on a new cache (about a minute)
+    "tests/test_compile_context.py::",
     "tests/test_sweep.py::test_every_member_equals_a_serial_solve[mhd-sphere]",
     "tests/test_sweep.py::test_every_member_equals_a_serial_solve[perturbed-heavy-top]",
     "tests/test_sweep.py::test_client_killed_and_restarted_finishes_like_an_uninterrupted_run",

@@ -43,8 +43,10 @@ __all__ = ["NWORK", "finish", "iterate"]
 
 #: Scratch rows (complex) per member: ten real planes.
 NWORK = 5
-#: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
-_FM = {"reassoc", "nsz", "contract"}
+#: Products may fuse, never reassociate (see :mod:`isoflow._compiled.dense_tiles`: with
+#: ``reassoc`` the states depended on whether the pass was compiled in the run's process or
+#: loaded from numba's cache); the residual's sum is split by tile column by hand.
+_FM = {"nsz", "contract"}
 
 
 @numba.njit(cache=True, inline="always")
@@ -103,6 +105,7 @@ def _combine(W, X, Pr, Pi, T1, T2, T3, rowoff, G, s, half, quarter):  # type: ig
     PrT = np.empty((_TILE, _TILE))
     PiT = np.empty((_TILE, _TILE))
     GT = np.empty((_TILE, _TILE), dtype=G.dtype)
+    cols = np.zeros(_TILE)  # the residual's partial sums by tile column (a fixed order)
     rr = 0.0
     for bi in range(0, n, _TILE):
         ie = min(bi + _TILE, n)
@@ -139,7 +142,7 @@ def _combine(W, X, Pr, Pi, T1, T2, T3, rowoff, G, s, half, quarter):  # type: ig
                     x = x_row[jj]
                     dr = gr - x.real
                     di = gi - x.imag
-                    rr += 2.0 * (dr * dr + di * di)
+                    cols[jj] += 2.0 * (dr * dr + di * di)
             _store_t(GT, G, bi, ie, bj)
         for i in range(bi, ie):  # the diagonal tile
             o = rowoff[i]
@@ -168,6 +171,8 @@ def _combine(W, X, Pr, Pi, T1, T2, T3, rowoff, G, s, half, quarter):  # type: ig
             dr = gr - x.real
             di = gi - x.imag
             rr += dr * dr + di * di
+    for jj in range(_TILE):
+        rr += cols[jj]
     return rr
 
 

@@ -31,8 +31,12 @@ __all__ = ["NWORK", "finish", "iterate"]
 
 #: Scratch rows per member.
 NWORK = 3
-#: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
-_FM = {"reassoc", "nsz", "contract"}
+#: Products may fuse (results differ from NumPy by rounding), but never reassociate: with
+#: ``reassoc`` the new iterate's rounding depended on what else LLVM saw when it compiled the
+#: pass (a loop compiled in the run's process and the same loop loaded from numba's cache gave
+#: states 1e-16 apart, so a run resumed from another process did not continue bit for bit).
+#: The residual's sum is split over the tile's columns by hand to vectorize in a fixed order.
+_FM = {"nsz", "contract"}
 
 
 @numba.njit(cache=True, inline="always")
@@ -65,6 +69,7 @@ def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyp
     n = W.shape[0]
     PT = np.empty((_TILE, _TILE), dtype=P.dtype)
     GT = np.empty((_TILE, _TILE), dtype=G.dtype)
+    cols = np.zeros(_TILE)  # the residual's partial sums by tile column (a fixed order)
     rr = 0.0
     for bi in range(0, n, _TILE):
         ie = min(bi + _TILE, n)
@@ -86,7 +91,7 @@ def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyp
                     g_row[jj] = g
                     gt_row[jj] = s * g.conjugate()
                     d = g - x_row[jj]
-                    rr += 2.0 * (d.real * d.real + d.imag * d.imag)
+                    cols[jj] += 2.0 * (d.real * d.real + d.imag * d.imag)
             _store_t(GT, G, bi, ie, bj)
         for i in range(bi, ie):  # the diagonal tile
             o = rowoff[i]
@@ -103,6 +108,8 @@ def _combine(W, X, P, Tp, rowoff, G, s, half, quarter):  # type: ignore[no-untyp
             G[i, i] = g
             d = g - X[i, i]
             rr += d.real * d.real + d.imag * d.imag
+    for jj in range(_TILE):
+        rr += cols[jj]
     return rr
 
 
