@@ -25,7 +25,10 @@ u(512)     1.09 / 2.24  1.04 / 1.82  1.02 / 2.06
 The rewritten layer with the old method's per-step work (last column) is at or below the old
 code in every case. The default's quartic start takes 1.82 iterations a step where the cubic
 took 2.01 at so(256) (1.82 against 1.75 at so(512)), at the same time per step: its
-iteration reads higher because a step's fixed work is shared by fewer iterations.
+iteration reads higher because a step's fixed work is shared by fewer iterations. Measured
+before the tile pass stopped reassociating (same day, for states that do not depend on where
+the pass was compiled): that costs 3-5 % more per iteration (so(256) 1.39-1.46 against
+1.29-1.39, u(512) 0.95-1.02 against 0.91-0.98, three alternating runs of the same script).
 """
 
 from __future__ import annotations
