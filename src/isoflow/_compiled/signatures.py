@@ -120,12 +120,8 @@ class OneUnit:
         """The call for the driver signature ``signature`` (its arrays with the unit axis)."""
         d = _UNIT_LOOPS.get(signature)
         if d is None:
-            head, (W, ring, heads, nh, comp), tail = (
-                signature.args[:9],
-                signature.args[9:14],
-                signature.args[14:],
-            )
-            one = tuple(a.copy(ndim=a.ndim - 1) for a in (W, ring, heads, nh, comp))
+            head, per_unit, tail = _split(signature.args)
+            one = tuple(a.copy(ndim=a.ndim - 1) for a in per_unit)
             sig = types.none(*head, *one, *tail, types.int64)
             d = _UNIT_LOOPS[signature] = numba.njit(sig, cache=True, nogil=True)(
                 driver.run_unit.py_func
@@ -133,8 +129,15 @@ class OneUnit:
         return cls(d)
 
     def __call__(self, *args: Any) -> None:
-        head, (W, ring, heads, nh, comp), tail = args[:9], args[9:14], args[14:]
-        self.unit(*head, W[0], ring[0], heads[0], nh[0], comp[0], *tail, 0)
+        head, per_unit, tail = _split(args)
+        self.unit(*head, *(a[0] for a in per_unit), *tail, 0)
+
+
+def _split(args: tuple[Any, ...]) -> tuple[tuple[Any, ...], tuple[Any, ...], tuple[Any, ...]]:
+    """A driver's arguments (or their types) as ``(head, per_unit, tail)``: ``per_unit`` the
+    arrays with a unit axis (``W, ring, head, nh, comp``), between the functions, the layout
+    and the scratch count before them and the shared arrays and records after them."""
+    return args[:9], args[9:14], args[14:]
 
 
 @numba.njit(cache=True)
