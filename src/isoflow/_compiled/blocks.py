@@ -51,6 +51,14 @@ Layouts with one member per unit get :func:`lanes`, :func:`lane_sumsq`, :func:`s
 Registering an implementation: ``@provide(bracket_triple, DenseSmall)`` on a
 ``numba.njit(inline="always")`` function with the block's arguments. The blocks are resolved
 at compile time; calling one from Python raises ``NotImplementedError``.
+
+Inlined in numba's IR, a block is compiled with the flags of the stage it lands in, not with
+its own: a ``fastmath`` on the block's decorator would do nothing. The stages have none, so a
+block's arithmetic is neither reassociated nor contracted, and a loop compiled in a run's
+process gives the same states as one loaded from numba's cache (reassociation made the two
+differ once: :mod:`isoflow._compiled.dense_tiles`). A fused specialization that needs other
+flags compiles a function of its own that the stage calls (the BLAS tiles, the spin chain's
+sweeps), with the flags stated there.
 """
 
 from __future__ import annotations
@@ -230,7 +238,7 @@ def _one_lane(lay):  # type: ignore[no-untyped-def]
     return 1
 
 
-@numba.njit(cache=True, inline="always", fastmath={"reassoc", "nsz", "contract"})
+@numba.njit(cache=True, inline="always")
 def _member_sumsq(lay, W, out):  # type: ignore[no-untyped-def]
     acc = 0.0
     for i in range(W.shape[0]):

@@ -56,8 +56,6 @@ __all__ = [
 
 #: Largest ``n`` for which the written-out products beat BLAS calls (measured, benchmark 10).
 SMALL_N = 16
-#: Products and reductions may reassociate and fuse; results differ from NumPy by rounding.
-_FM = {"reassoc", "nsz", "contract"}
 #: Tile edge of the mirrored passes of the BLAS layout's IsoMP (:mod:`.dense_tiles`).
 _TILE = 32
 #: Target row-block height of its triangular product (a multiple of ``_TILE``).
@@ -156,7 +154,7 @@ def mirror_sum(lay, C):  # type: ignore[no-untyped-def]
             Cm[j, i] = pji + s * pij.conjugate()
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def product(n, A, B, out):  # type: ignore[no-untyped-def]
     """``out = A B`` (written out, ``n x n`` views; also the pair layouts' small products)."""
     for i in range(n):
@@ -202,7 +200,7 @@ def _bracket_blas(lay, B, X, C):  # type: ignore[no-untyped-def]
     mirror_sum(lay, C)
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _stage_update(lay, W, a, C, b, T, G, X, rr):  # type: ignore[no-untyped-def]
     """``G = Pi(W + a C + b T)`` pair by pair; ``rr[0] = |G - X|^2``."""
     n = lay.n
@@ -229,7 +227,7 @@ def _stage_update(lay, W, a, C, b, T, G, X, rr):  # type: ignore[no-untyped-def]
     rr[0] = acc
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _stage_update1(lay, W, a, C, G, X, rr):  # type: ignore[no-untyped-def]
     """``G = Pi(W + a C)`` pair by pair; ``rr[0] = |G - X|^2``."""
     n = lay.n

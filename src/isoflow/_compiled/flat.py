@@ -8,13 +8,17 @@ whole states entry by entry are written once, here, on flat vectors:
   stage offsets :math:`D = X - W` (:func:`guess`), and the ring itself (:func:`push`);
 * Anderson mixing of the fixed-point iterates (:func:`anderson`), the same algorithm as
   :class:`isoflow.FixedPoint` (see :mod:`isoflow.nonlinear`);
-* sums of squares and real inner products (:func:`sumsq`, :func:`sumsq_diff`, :func:`rdot`);
+* sums of squares and real inner products (:func:`sumsq`, :func:`rdot`);
 * the exact sum of two numbers, :func:`two_sum`, for the compensated update of a state
   (:mod:`isoflow.methods.isomp`).
 
 Element-wise loops are compiled *without* reassociation, so an entry and its mirror in a
 matrix space (``X[j, i] = s * conj(X[i, j])``) go through the same operations and stay exact
-mirrors; only the reductions reassociate (to vectorize).
+mirrors. Only the norms reassociate (to vectorize): they decide when to stop, and a last-bit
+difference in one changes a decision only when it sits exactly at the tolerance. Anything that
+moves a state (the inner products of Anderson mixing included) is free of reassociation, so
+that a loop compiled in a run's process and one loaded from numba's cache give the same
+states to the last bit.
 """
 
 from __future__ import annotations
@@ -30,11 +34,10 @@ __all__ = [
     "push",
     "rdot",
     "sumsq",
-    "sumsq_diff",
     "two_sum",
 ]
 
-#: Reassociation for the reductions only (sums of squares, inner products).
+#: Reassociation for the norms only (sums of squares).
 _REDUCE = {"reassoc", "nsz", "contract"}
 
 
@@ -48,25 +51,27 @@ def sumsq(a):  # type: ignore[no-untyped-def]
     return acc
 
 
-@numba.njit(cache=True, fastmath=_REDUCE)
-def sumsq_diff(a, b):  # type: ignore[no-untyped-def]
-    """``sum |a_i - b_i|^2``."""
-    acc = 0.0
-    for i in range(a.shape[0]):
-        v = a[i] - b[i]
-        acc += v.real * v.real + v.imag * v.imag
-    return acc
-
-
-@numba.njit(cache=True, fastmath=_REDUCE)
+@numba.njit(cache=True, fastmath={"nsz"})
 def rdot(a, b):  # type: ignore[no-untyped-def]
-    r"""The real inner product :math:`\operatorname{Re} \sum \bar a_i b_i`."""
-    acc = 0.0
-    for i in range(a.shape[0]):
-        x = a[i]
-        y = b[i]
-        acc += x.real * y.real + x.imag * y.imag
-    return acc
+    r"""The real inner product :math:`\operatorname{Re} \sum \bar a_i b_i`, in four partial sums
+    of a fixed order.
+
+    Not reassociated, unlike the norms: Anderson's coefficients come from these products, so
+    their rounding moves the iterates, and with ``reassoc`` it could depend on how LLVM
+    compiled the loop in a given process (a run and its resume would then differ in the last
+    bit; see :mod:`isoflow._compiled.dense_tiles`).
+    """
+    n = a.shape[0]
+    s0 = s1 = s2 = s3 = 0.0
+    m = n - n % 4
+    for i in range(0, m, 4):
+        s0 += a[i].real * b[i].real + a[i].imag * b[i].imag
+        s1 += a[i + 1].real * b[i + 1].real + a[i + 1].imag * b[i + 1].imag
+        s2 += a[i + 2].real * b[i + 2].real + a[i + 2].imag * b[i + 2].imag
+        s3 += a[i + 3].real * b[i + 3].real + a[i + 3].imag * b[i + 3].imag
+    for i in range(m, n):
+        s0 += a[i].real * b[i].real + a[i].imag * b[i].imag
+    return (s0 + s1) + (s2 + s3)
 
 
 @numba.njit(cache=True)

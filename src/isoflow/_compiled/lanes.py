@@ -30,7 +30,6 @@ __all__ = ["LANES", "MIN_MEMBERS", "ElementwiseLanes", "lanes_layout"]
 LANES = 16
 #: Smallest ensemble run in this layout.
 MIN_MEMBERS = 8
-_FM = {"reassoc", "nsz", "contract"}
 
 
 class ElementwiseLanes(NamedTuple):
@@ -48,7 +47,7 @@ def _lanes(lay):  # type: ignore[no-untyped-def]
     return lay.L
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
     n, L = lay.n, lay.L
     Xm = X.reshape((n, n, L))
@@ -60,7 +59,7 @@ def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
                 Bm[i, j, q] = c * Xm[i, j, q]
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _product(n, L, A, B, out):  # type: ignore[no-untyped-def]
     """``out = A B`` lane by lane (``(n, n, L)`` views)."""
     for i in range(n):
@@ -73,7 +72,7 @@ def _product(n, L, A, B, out):  # type: ignore[no-untyped-def]
                     out[i, j, q] += A[i, k, q] * B[k, j, q]
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _mirror_sum(lay, C):  # type: ignore[no-untyped-def]
     """``C = P + sigma(P)`` in place, pair by pair, lane by lane."""
     n, L, s = lay.n, lay.L, lay.s
@@ -107,7 +106,7 @@ def _bracket(lay, B, X, C):  # type: ignore[no-untyped-def]
     _mirror_sum(lay, C)
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _update(lay, W, a, C, b, T, G, X, rr):  # type: ignore[no-untyped-def]
     """``G = Pi(W + a C + b T)`` pair by pair per lane; ``rr[q] = |G_q - X_q|^2``."""
     n, L, s = lay.n, lay.L, lay.s
@@ -180,7 +179,7 @@ def _advance_state(lay, W, h, C, E, Wn, fin):  # type: ignore[no-untyped-def]
                     Wo[i, i, q] -= tr
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _lane_sumsq(lay, W, out):  # type: ignore[no-untyped-def]
     L = lay.L
     for q in range(L):

@@ -76,14 +76,23 @@ class SpinChain(NamedTuple):
     nch: int
 
 
-#: Reassociation (and no signed zeros) only: vectorizes the residual reductions.
-_FM = {"reassoc", "nsz"}
+#: The sweeps that write states: no signed zeros, never reassociation. With ``reassoc`` the
+#: new iterates' rounding could depend on what else LLVM saw when it compiled a sweep, so a
+#: loop compiled in a run's process and one loaded from numba's cache could disagree in the
+#: last bit (as the dense BLAS tiles did: :mod:`.dense_tiles`) and a resume would not continue
+#: bit for bit. The inline helpers below take the flags of the function they are inlined into.
+_STATE = {"nsz"}
+#: The residuals' sums alone reassociate (to vectorize): they decide only when to stop.
+_REDUCE = {"reassoc", "nsz"}
+#: Spins a sweep handles before it sums their squared changes (a scratch row of this many
+#: doubles, 16 KiB, stays in the L1 cache between the sweep and the sum).
+_BLOCK = 2048
 #: Indices are cast to unsigned: numba wraps negative signed indices around (a select per
 #: access), which kept LLVM from vectorizing the sweeps (5x slower per spin).
 _U = np.uint64
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _b(X, N, c, im, ip):  # type: ignore[no-untyped-def]
     """``B_i = c (x_{i-1} + x_{i+1})`` from the flat ``(3, N)`` layout (neighbours ``im, ip``)."""
     n, a, b = _U(N), _U(im), _U(ip)
@@ -93,13 +102,13 @@ def _b(X, N, c, im, ip):  # type: ignore[no-untyped-def]
     )  # fmt: skip
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _iso_one(X, W, G, N, i, im, ip, c, half, quarter):  # type: ignore[no-untyped-def]
     b0, b1, b2 = _b(X, N, c, im, ip)
     return _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter)
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter):  # type: ignore[no-untyped-def]
     """IsoMP's stage map at spin ``i`` with its ``B_i = (b0, b1, b2)``; the squared change."""
     n, k = _U(N), _U(i)  # unsigned: no negative-index wraparound, the loops vectorize
@@ -115,7 +124,7 @@ def _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter):  # type: ignore[no-untype
     return (g0 - x0) ** 2 + (g1 - x1) ** 2 + (g2 - x2) ** 2
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _smm_one(m, X, W, G, N, i, im, ip, c, half):  # type: ignore[no-untyped-def]
     n, k = _U(N), _U(i)  # unsigned: no negative-index wraparound, the loops vectorize
     n2 = n + n
@@ -130,7 +139,7 @@ def _smm_one(m, X, W, G, N, i, im, ip, c, half):  # type: ignore[no-untyped-def]
     return (g0 - X[k]) ** 2 + (g1 - X[n + k]) ** 2 + (g2 - X[n2 + k]) ** 2
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _point_one(M, W, m, N, i):  # type: ignore[no-untyped-def]
     n, k = _U(N), _U(i)  # unsigned: no negative-index wraparound, the loops vectorize
     n2 = n + n
@@ -142,26 +151,54 @@ def _point_one(M, W, m, N, i):  # type: ignore[no-untyped-def]
     m[n2 + k] = f * a2
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def _iso_range(X, W, G, N, c, half, quarter, lo, hi):  # type: ignore[no-untyped-def]
-    """IsoMP sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``)."""
+@numba.njit(cache=True, fastmath=_REDUCE)
+def _sum(r, n):  # type: ignore[no-untyped-def]
+    """``r[0] + ... + r[n - 1]`` (a residual: reassociated, vectorized)."""
     acc = 0.0
-    for i in range(lo, hi):
-        acc += _iso_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter)
+    for j in range(n):
+        acc += r[j]
     return acc
 
 
-@numba.njit(cache=True, fastmath=_FM)
+@numba.njit(cache=True, fastmath=_STATE)
+def _iso_block(X, W, G, N, c, half, quarter, lo, hi, r):  # type: ignore[no-untyped-def]
+    for i in range(lo, hi):
+        r[i - lo] = _iso_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter)
+
+
+@numba.njit(cache=True)
+def _iso_range(X, W, G, N, c, half, quarter, lo, hi):  # type: ignore[no-untyped-def]
+    """IsoMP sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``);
+    the sum of the squared changes, block by block (:data:`_BLOCK`)."""
+    r = np.empty(_BLOCK)
+    acc = 0.0
+    for b in range(lo, hi, _BLOCK):
+        e = min(b + _BLOCK, hi)
+        _iso_block(X, W, G, N, c, half, quarter, b, e, r)
+        acc += _sum(r, e - b)
+    return acc
+
+
+@numba.njit(cache=True, fastmath=_STATE)
 def _point_range(X, W, m, N, lo, hi):  # type: ignore[no-untyped-def]
     for i in range(lo, hi):
         _point_one(X, W, m, N, i)
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def _smm_range(m, X, W, G, N, c, half, lo, hi):  # type: ignore[no-untyped-def]
-    acc = 0.0
+@numba.njit(cache=True, fastmath=_STATE)
+def _smm_block(m, X, W, G, N, c, half, lo, hi, r):  # type: ignore[no-untyped-def]
     for i in range(lo, hi):
-        acc += _smm_one(m, X, W, G, N, i, i - 1, i + 1, c, half)
+        r[i - lo] = _smm_one(m, X, W, G, N, i, i - 1, i + 1, c, half)
+
+
+@numba.njit(cache=True)
+def _smm_range(m, X, W, G, N, c, half, lo, hi):  # type: ignore[no-untyped-def]
+    r = np.empty(_BLOCK)
+    acc = 0.0
+    for b in range(lo, hi, _BLOCK):
+        e = min(b + _BLOCK, hi)
+        _smm_block(m, X, W, G, N, c, half, b, e, r)
+        acc += _sum(r, e - b)
     return acc
 
 
@@ -245,7 +282,7 @@ def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     rr[0] = acc
 
 
-@numba.njit(cache=True, inline="always", fastmath={"nsz"})
+@numba.njit(cache=True, inline="always")
 def _final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
     """``Wn_i = W_i + h B_i x Y_i``, compensated by ``E`` (TwoSum; no reassociation, which
     would simplify its exact error away)."""
@@ -258,7 +295,7 @@ def _final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
     Wn[n2 + k], E[n2 + k] = two_sum(W[n2 + k], h * (b0 * y1 - b1 * y0) + E[n2 + k])
 
 
-@numba.njit(cache=True, fastmath={"nsz"})
+@numba.njit(cache=True, fastmath=_STATE)
 def _final_compensated(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
     """:func:`_final_one` for every spin: the interior in a loop of its own with no
     reduction and no wrapped neighbours, which vectorizes without reassociation. The
@@ -272,31 +309,31 @@ def _final_compensated(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
         _final_one(Y, W, Wn, E, N, N - 1, N - 2, 0, c, h)
 
 
-@numba.njit(cache=True, fastmath=_FM)
+@numba.njit(cache=True, fastmath=_REDUCE)
 def _size(V):  # type: ignore[no-untyped-def]
-    """``sum |V_j|``: finite iff every entry is (a reduction that vectorizes)."""
+    """``sum |V_j|``: finite iff every entry is (a reduction that vectorizes; its order does
+    not change whether it is finite)."""
     acc = 0.0
     for j in range(V.shape[0]):
         acc += abs(V[j])
     return acc
 
 
-@numba.njit(cache=True, fastmath=_FM)
+@numba.njit(cache=True, fastmath=_STATE)
 def _final_plain(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B(Y) x Y`` without compensation; returns a sum that is finite iff every
-    entry is."""
-    acc = _final_at_b(Y, W, Wn, N, 0, N - 1, 1 % N, c, h)
+    """``Wn = W + h B(Y) x Y`` without compensation (the finiteness check is :func:`_size`'s
+    pass, as for :func:`_final_compensated`)."""
+    _final_at_b(Y, W, Wn, N, 0, N - 1, 1 % N, c, h)
     for i in range(1, N - 1):
-        acc += _final_at_b(Y, W, Wn, N, i, i - 1, i + 1, c, h)
+        _final_at_b(Y, W, Wn, N, i, i - 1, i + 1, c, h)
     if N > 1:
-        acc += _final_at_b(Y, W, Wn, N, N - 1, N - 2, 0, c, h)
-    return acc
+        _final_at_b(Y, W, Wn, N, N - 1, N - 2, 0, c, h)
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _final_at_b(Y, W, Wn, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
     b0, b1, b2 = _b(Y, N, c, im, ip)
-    return _final_at(Y, W, Wn, N, i, b0, b1, b2, h)
+    _final_at(Y, W, Wn, N, i, b0, b1, b2, h)
 
 
 @numba.njit(cache=True)
@@ -305,13 +342,14 @@ def _final(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
     returns a sum that is finite iff every entry of ``Wn`` is."""
     if E.shape[0] != 0:
         _final_compensated(Y, W, Wn, E, N, c, h)
-        return _size(Wn)
-    return _final_plain(Y, W, Wn, N, c, h)
+    else:
+        _final_plain(Y, W, Wn, N, c, h)
+    return _size(Wn)
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _final_at(Y, W, Wn, N, i, b0, b1, b2, h):  # type: ignore[no-untyped-def]
-    """``Wn_i = W_i + h B_i x Y_i`` with ``B_i = (b0, b1, b2)``; the sum of its sizes."""
+    """``Wn_i = W_i + h B_i x Y_i`` with ``B_i = (b0, b1, b2)``."""
     n, k = _U(N), _U(i)
     n2 = n + n
     y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
@@ -321,7 +359,6 @@ def _final_at(Y, W, Wn, N, i, b0, b1, b2, h):  # type: ignore[no-untyped-def]
     Wn[k] = v0
     Wn[n + k] = v1
     Wn[n2 + k] = v2
-    return abs(v0) + abs(v1) + abs(v2)
 
 
 @numba.njit(cache=True)
@@ -355,7 +392,7 @@ def spherical_sweeps(layout: Layout) -> tuple[Any, Any]:
 # same sweep: 48 more bytes a spin than IsoMP's, no more passes.
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _site_noise_at(amp, row, i, inv):  # type: ignore[no-untyped-def]
     """Site noise only: ``(sigma_i / h) dbeta_i`` (``amp[3 i] = sigma_i``, ``dbeta_i`` at
     ``row[3 i .. 3 i + 2]``)."""
@@ -364,7 +401,7 @@ def _site_noise_at(amp, row, i, inv):  # type: ignore[no-untyped-def]
     return s * row[r], s * row[r + _U(1)], s * row[r + _U(2)]
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _noise_at(fields, amp, row, N, i, inv):  # type: ignore[no-untyped-def]
     """The noise term of ``B_i``, ``(1/h) (sum_j row_j F_j + sigma_i dbeta_i)``."""
     m = fields.shape[0]
@@ -385,26 +422,36 @@ def _noise_at(fields, amp, row, N, i, inv):  # type: ignore[no-untyped-def]
     return inv * n0, inv * n1, inv * n2
 
 
-@numba.njit(cache=True, inline="always", fastmath=_FM)
+@numba.njit(cache=True, inline="always")
 def _sto_one(X, W, G, N, i, im, ip, c, half, quarter, fields, amp, row, inv):  # type: ignore[no-untyped-def]
     b0, b1, b2 = _b(X, N, c, im, ip)
     n0, n1, n2 = _noise_at(fields, amp, row, N, i, inv)
     return _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi):  # type: ignore[no-untyped-def]
-    """The stochastic sweep over the interior spins ``lo <= i < hi``; site noise alone (the
-    thermal case) in a loop of its own, which vectorizes."""
-    acc = 0.0
+@numba.njit(cache=True, fastmath=_STATE)
+def _sto_block(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi, r):  # type: ignore[no-untyped-def]
+    """The stochastic sweep over the interior spins ``lo <= i < hi``, squared changes into
+    ``r``; site noise alone (the thermal case) in a loop of its own, which vectorizes."""
     if fields.shape[0] == 0 and amp.shape[0] > 0:
         for i in range(lo, hi):
             b0, b1, b2 = _b(X, N, c, i - 1, i + 1)
             n0, n1, n2 = _site_noise_at(amp, row, i, inv)
-            acc += _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
-        return acc
+            r[i - lo] = _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
+        return
     for i in range(lo, hi):
-        acc += _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter, fields, amp, row, inv)
+        r[i - lo] = _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter, fields, amp, row, inv)
+
+
+@numba.njit(cache=True)
+def _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi):  # type: ignore[no-untyped-def]
+    """:func:`_sto_block` block by block; the sum of the squared changes."""
+    r = np.empty(_BLOCK)
+    acc = 0.0
+    for b in range(lo, hi, _BLOCK):
+        e = min(b + _BLOCK, hi)
+        _sto_block(X, W, G, N, c, half, quarter, fields, amp, row, inv, b, e, r)
+        acc += _sum(r, e - b)
     return acc
 
 
@@ -449,17 +496,11 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     rr[0] = acc
 
 
-@numba.njit(cache=True, fastmath=_FM)
-def finish_sto(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B~(X) x X`` from the accepted ``X``, the step's noise in ``B~`` (not
-    compensated: ``E`` is empty)."""
-    N = lay.N
-    c = lay.c
+@numba.njit(cache=True, fastmath=_STATE)
+def _final_sto(X, W, Wn, N, c, hp, fields, amp, row):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B~(X) x X``, the step's noise in ``B~``."""
     inv = 1.0 / hp
-    fields, _, amp = mp
-    row = sd[0]
     site_only = fields.shape[0] == 0 and amp.shape[0] > 0
-    acc = 0.0
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
@@ -468,8 +509,16 @@ def finish_sto(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type:
             n0, n1, n2 = _site_noise_at(amp, row, i, inv)
         else:
             n0, n1, n2 = _noise_at(fields, amp, row, N, i, inv)
-        acc += _final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
-    fin[0] = math.isfinite(acc)
+        _final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
+
+
+@numba.njit(cache=True)
+def finish_sto(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B~(X) x X`` from the accepted ``X``, the step's noise in ``B~`` (not
+    compensated: ``E`` is empty)."""
+    fields, _, amp = mp
+    _final_sto(X, W, Wn, lay.N, lay.c, hp, fields, amp, sd[0])
+    fin[0] = math.isfinite(_size(Wn))
 
 
 def stochastic_sweeps(layout: Layout) -> tuple[Any, Any]:

@@ -38,8 +38,8 @@ from numpy.typing import NDArray
 
 from .._compiled.stages.split import provide_flow
 
-#: Reassociation for the symmetric products (reductions and updates vectorize).
-_FM = {"reassoc", "nsz", "contract"}
+#: The symmetric products may fuse multiplies and adds, never reassociate (they move states).
+_FM = {"nsz", "contract"}
 
 __all__ = [
     "SphereFlow",
@@ -283,9 +283,14 @@ class SphereFlow(NamedTuple):
 @numba.njit(cache=True, fastmath=_FM)
 def _symmetric_product(P, off, k, xr, xi, yr, yi):  # type: ignore[no-untyped-def]
     """``y = M x`` for the symmetric ``k x k`` matrix ``M`` stored as its upper triangle, row
-    by row, at ``P[off:]``, and a complex ``x`` given by its real and imaginary parts (each
-    entry of ``M`` read once, used for both of its positions and both parts: real loops that
-    vectorize)."""
+    by row, at ``P[off:]``, and a complex ``x`` given by its real and imaginary parts.
+
+    Row ``i`` of the triangle serves twice: as the column part ``y_j += M_ij x_i`` (``j > i``,
+    a loop that vectorizes without reassociation) and as the row's inner product with ``x``,
+    summed in four partial sums of a fixed order (read again from the L1 cache). No
+    reassociation: the result moves the state, and with ``reassoc`` its rounding could depend on
+    how LLVM compiled the loop in a given process (a run and its resume would then differ).
+    """
     for i in range(k):
         yr[i] = 0.0
         yi[i] = 0.0
@@ -293,19 +298,38 @@ def _symmetric_product(P, off, k, xr, xi, yr, yi):  # type: ignore[no-untyped-de
     for i in range(k):
         xri = xr[i]
         xii = xi[i]
-        d = P[o]
-        accr = d * xri
-        acci = d * xii
         base = o - i
         for j in range(i + 1, k):
             mij = P[base + j]
-            accr += mij * xr[j]
-            acci += mij * xi[j]
             yr[j] += mij * xri
             yi[j] += mij * xii
+        d = P[o]
+        r0 = d * xri
+        i0 = d * xii
+        r1 = i1 = r2 = i2 = r3 = i3 = 0.0
+        j = i + 1
+        while j + 3 < k:
+            m0 = P[base + j]
+            m1 = P[base + j + 1]
+            m2 = P[base + j + 2]
+            m3 = P[base + j + 3]
+            r0 += m0 * xr[j]
+            i0 += m0 * xi[j]
+            r1 += m1 * xr[j + 1]
+            i1 += m1 * xi[j + 1]
+            r2 += m2 * xr[j + 2]
+            i2 += m2 * xi[j + 2]
+            r3 += m3 * xr[j + 3]
+            i3 += m3 * xi[j + 3]
+            j += 4
+        while j < k:
+            mij = P[base + j]
+            r0 += mij * xr[j]
+            i0 += mij * xi[j]
+            j += 1
+        yr[i] += (r0 + r1) + (r2 + r3)
+        yi[i] += (i0 + i1) + (i2 + i3)
         o += k - i
-        yr[i] += accr
-        yi[i] += acci
 
 
 #: Side of the square tiles in which :func:`dissipate` moves the matrix to and from its
