@@ -84,8 +84,9 @@ class SpinChain(NamedTuple):
 _STATE = {"nsz"}
 #: The residuals' sums alone reassociate (to vectorize): they decide only when to stop.
 _REDUCE = {"reassoc", "nsz"}
-#: Spins a sweep handles before it sums their squared changes (a scratch row of this many
-#: doubles, 16 KiB, stays in the L1 cache between the sweep and the sum).
+#: Spins a sweep handles before it sums their squared changes: they are written to a buffer of
+#: this many doubles (16 KiB, in the stage's scratch row; one per chunk of a threaded sweep),
+#: still in the L1 cache when it is summed.
 _BLOCK = 2048
 #: Indices are cast to unsigned: numba wraps negative signed indices around (a select per
 #: access), which kept LLVM from vectorizing the sweeps (5x slower per spin).
@@ -160,6 +161,15 @@ def _sum(r, n):  # type: ignore[no-untyped-def]
     return acc
 
 
+@numba.njit(cache=True, inline="always")
+def _buffer(row, ch, nch):  # type: ignore[no-untyped-def]
+    """Chunk ``ch``'s residual buffer of ``nch`` in a scratch row: :data:`_BLOCK` entries, or
+    an equal share of the row if it is shorter (a threaded sweep runs on chains of at least
+    :data:`PARALLEL_MIN_SPINS` spins, three entries each, so a share is never empty)."""
+    size = min(_BLOCK, row.shape[0] // nch)
+    return row[ch * size : (ch + 1) * size]
+
+
 @numba.njit(cache=True, fastmath=_STATE)
 def _iso_block(X, W, G, N, c, half, quarter, lo, hi, r):  # type: ignore[no-untyped-def]
     for i in range(lo, hi):
@@ -167,13 +177,14 @@ def _iso_block(X, W, G, N, c, half, quarter, lo, hi, r):  # type: ignore[no-unty
 
 
 @numba.njit(cache=True)
-def _iso_range(X, W, G, N, c, half, quarter, lo, hi):  # type: ignore[no-untyped-def]
+def _iso_range(X, W, G, N, c, half, quarter, lo, hi, r):  # type: ignore[no-untyped-def]
     """IsoMP sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``);
-    the sum of the squared changes, block by block (:data:`_BLOCK`)."""
-    r = np.empty(_BLOCK)
+    the sum of the squared changes, block by block through the buffer ``r`` (:data:`_BLOCK`
+    or fewer entries)."""
+    size = min(_BLOCK, r.shape[0])
     acc = 0.0
-    for b in range(lo, hi, _BLOCK):
-        e = min(b + _BLOCK, hi)
+    for b in range(lo, hi, size):
+        e = min(b + size, hi)
         _iso_block(X, W, G, N, c, half, quarter, b, e, r)
         acc += _sum(r, e - b)
     return acc
@@ -192,11 +203,11 @@ def _smm_block(m, X, W, G, N, c, half, lo, hi, r):  # type: ignore[no-untyped-de
 
 
 @numba.njit(cache=True)
-def _smm_range(m, X, W, G, N, c, half, lo, hi):  # type: ignore[no-untyped-def]
-    r = np.empty(_BLOCK)
+def _smm_range(m, X, W, G, N, c, half, lo, hi, r):  # type: ignore[no-untyped-def]
+    size = min(_BLOCK, r.shape[0])
     acc = 0.0
-    for b in range(lo, hi, _BLOCK):
-        e = min(b + _BLOCK, hi)
+    for b in range(lo, hi, size):
+        e = min(b + size, hi)
         _smm_block(m, X, W, G, N, c, half, b, e, r)
         acc += _sum(r, e - b)
     return acc
@@ -208,14 +219,15 @@ def _smm_range(m, X, W, G, N, c, half, lo, hi):  # type: ignore[no-untyped-def]
 # ``a * N + i``): no reshaped views, which numba's parallel lowering does not write through.
 @numba.njit(cache=True)
 def iterate_iso_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
-    """One IsoMP sweep over the chain (``f`` is not called: ``B`` is formed on the fly)."""
+    """One IsoMP sweep over the chain (``f`` is not called: ``B`` is formed on the fly;
+    ``work[0]`` takes the spins' squared changes)."""
     N = lay.N
     c = lay.c
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
     acc = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter)
     if N > 1:
-        acc += _iso_range(X, W, G, N, c, half, quarter, 1, N - 1)
+        acc += _iso_range(X, W, G, N, c, half, quarter, 1, N - 1, work[0])
         acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
     rr[0] = acc
 
@@ -234,7 +246,7 @@ def iterate_iso_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _iso_range(X, W, G, N, c, half, quarter, lo, hi)
+            part[ch] = _iso_range(X, W, G, N, c, half, quarter, lo, hi, _buffer(work[0], ch, nch))
     acc = part.sum()
     acc += _iso_one(X, W, G, N, 0, N - 1, 1, c, half, quarter)
     acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
@@ -243,7 +255,8 @@ def iterate_iso_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
 
 @numba.njit(cache=True)
 def iterate_smm_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
-    """One spherical-midpoint iteration: the points ``m`` (into ``work[0]``), then the sweep."""
+    """One spherical-midpoint iteration: the points ``m`` (into ``work[0]``), then the sweep
+    (the squared changes into ``work[1]``)."""
     N = lay.N
     c = lay.c
     half = 0.5 * hp
@@ -251,7 +264,7 @@ def iterate_smm_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     _point_range(X, W, m, N, 0, N)
     acc = _smm_one(m, X, W, G, N, 0, N - 1, 1 % N, c, half)
     if N > 1:
-        acc += _smm_range(m, X, W, G, N, c, half, 1, N - 1)
+        acc += _smm_range(m, X, W, G, N, c, half, 1, N - 1, work[1])
         acc += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
     rr[0] = acc
 
@@ -275,7 +288,7 @@ def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _smm_range(m, X, W, G, N, c, half, lo, hi)
+            part[ch] = _smm_range(m, X, W, G, N, c, half, lo, hi, _buffer(work[1], ch, nch))
     acc = part.sum()
     acc += _smm_one(m, X, W, G, N, 0, N - 1, 1, c, half)
     acc += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
@@ -444,12 +457,12 @@ def _sto_block(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi, r): 
 
 
 @numba.njit(cache=True)
-def _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi):  # type: ignore[no-untyped-def]
+def _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi, r):  # type: ignore[no-untyped-def]
     """:func:`_sto_block` block by block; the sum of the squared changes."""
-    r = np.empty(_BLOCK)
+    size = min(_BLOCK, r.shape[0])
     acc = 0.0
-    for b in range(lo, hi, _BLOCK):
-        e = min(b + _BLOCK, hi)
+    for b in range(lo, hi, size):
+        e = min(b + size, hi)
         _sto_block(X, W, G, N, c, half, quarter, fields, amp, row, inv, b, e, r)
         acc += _sum(r, e - b)
     return acc
@@ -467,7 +480,7 @@ def iterate_sto_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     row = sd[0]
     acc = _sto_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter, fields, amp, row, inv)
     if N > 1:
-        acc += _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, 1, N - 1)
+        acc += _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, 1, N - 1, work[0])
         acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)
     rr[0] = acc
 
@@ -489,7 +502,22 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi)
+            part[ch] = _sto_range(
+                X,
+                W,
+                G,
+                N,
+                c,
+                half,
+                quarter,
+                fields,
+                amp,
+                row,
+                inv,
+                lo,
+                hi,
+                _buffer(work[0], ch, nch),
+            )
     acc = part.sum()
     acc += _sto_one(X, W, G, N, 0, N - 1, 1, c, half, quarter, fields, amp, row, inv)
     acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)

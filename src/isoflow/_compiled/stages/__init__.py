@@ -243,7 +243,7 @@ register(
         specializations={
             SpinChain: Specialization(
                 spin_chain.spherical_sweeps,
-                1,
+                2,
                 "benchmark 5: fused memory sweeps",
             ),
         },
