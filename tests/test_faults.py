@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 import isoflow as iso
-from cli_helpers import isoflow_cmd, one_error_line, run_cli
+from cli_helpers import isoflow_cmd, one_error_line, run_cli, run_cli_here
 from helpers import disk_before_sampled_writes
 from isoflow import io
 from isoflow.io import safefile
@@ -383,7 +383,7 @@ def test_crafted_fields_give_one_line_errors(tmp_path: Path, case: str) -> None:
             assert isinstance(err.value, io.ResultFileError), repr(err.value)
         assert path.read_bytes() == before
     assert _leftovers(tmp_path) == []
-    out = run_cli("run", "--resume", str(path), "--quiet")
+    out = run_cli_here("run", "--resume", str(path), "--quiet")  # the command's error too
     assert out.returncode == 1
     one_error_line(out.stderr)
     assert path.read_bytes() == before
