@@ -8,8 +8,18 @@ compensated update (a TwoSum per entry; the compensation read, written and kept 
 step's undo; a finiteness pass) moves about 190 bytes a spin against the plain update's 72,
 which made a step's time per iteration 11-25 % longer at N = 1e4 and 1e6 on one thread
 (paired runs of both, 2026-11-26); ``ratio_uncompensated`` is the same measurement with
-``compensated=False``. Run alone:
-``python benchmarks/bench_4_spin_chain_bandwidth.py``.
+``compensated=False``.
+
+The sweeps write states without reassociation (2026-11-26: a loop compiled in a run's process
+and one loaded from numba's cache must agree to the last bit, see ``docs/architecture.rst``);
+the squared changes go through a 16 KiB buffer and are summed apart. Cost, alternating
+processes against the code before: the interior sweep alone 8.2-8.6 -> 9.8-9.9 ns a spin at
+N = 100, 1.5-1.6 -> 1.7-1.8 at 1e4 and 1e5, within the noise at 1e6; whole IsoMP steps at
+N = 1e5 within the noise (medians of five runs, 37.0 and 35.6 ns a spin-step). This
+benchmark's ratios in alternating runs (N = 1e2, 1e4, 1e6, 1e7), before: 2.10 1.01 1.69 2.27,
+2.01 0.79 1.18 1.70, 2.35 0.94 1.69 1.92; after: 2.34 0.96 1.48 2.08, 3.41 1.11 1.71 2.09,
+3.90 1.21 2.10 2.48 (2 cores shared with other work: the spread of one code is as wide as the
+difference). Run alone: ``python benchmarks/bench_4_spin_chain_bandwidth.py``.
 """
 
 from __future__ import annotations
