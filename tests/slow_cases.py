@@ -40,7 +40,7 @@ from __future__ import annotations
 #: the toy method, one compiled case per layout family, the experiments' figures).
 LONG = (
     "tests/test_experiments.py::",
-    # two fresh processes compiling the dense BLAS loops on a new cache (about a minute)
+    # two fresh processes compiling every fused loop that moves a state on a new cache (2 min)
     "tests/test_compile_context.py::",
     "tests/test_sweep.py::test_every_member_equals_a_serial_solve[mhd-sphere]",
     "tests/test_sweep.py::test_every_member_equals_a_serial_solve[perturbed-heavy-top]",
