@@ -170,24 +170,26 @@ def _buffer(row, ch, nch):  # type: ignore[no-untyped-def]
     return row[ch * size : (ch + 1) * size]
 
 
-@numba.njit(cache=True, fastmath=_STATE)
-def _iso_block(X, W, G, N, c, half, quarter, lo, hi, r):  # type: ignore[no-untyped-def]
-    for i in range(lo, hi):
-        r[i - lo] = _iso_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter)
-
-
-@numba.njit(cache=True)
-def _iso_range(X, W, G, N, c, half, quarter, lo, hi, r):  # type: ignore[no-untyped-def]
-    """IsoMP sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``);
-    the sum of the squared changes, block by block through the buffer ``r`` (:data:`_BLOCK`
-    or fewer entries)."""
+@numba.njit(cache=True, inline="always")
+def _blocked(block, lo, hi, r, args):  # type: ignore[no-untyped-def]
+    """A sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``) block
+    by block: ``block(b, e, r, *args)`` writes the squared changes of spins ``b <= i < e`` to
+    the buffer ``r`` (:data:`_BLOCK` or fewer entries), summed before the next block; returns
+    the sum over the range."""
     size = min(_BLOCK, r.shape[0])
     acc = 0.0
     for b in range(lo, hi, size):
         e = min(b + size, hi)
-        _iso_block(X, W, G, N, c, half, quarter, b, e, r)
+        block(b, e, r, *args)
         acc += _sum(r, e - b)
     return acc
+
+
+@numba.njit(cache=True, fastmath=_STATE)
+def _iso_block(lo, hi, r, X, W, G, N, c, half, quarter):  # type: ignore[no-untyped-def]
+    """IsoMP's sweep over the spins ``lo <= i < hi``, squared changes into ``r``."""
+    for i in range(lo, hi):
+        r[i - lo] = _iso_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter)
 
 
 @numba.njit(cache=True, fastmath=_STATE)
@@ -197,20 +199,11 @@ def _point_range(X, W, m, N, lo, hi):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, fastmath=_STATE)
-def _smm_block(m, X, W, G, N, c, half, lo, hi, r):  # type: ignore[no-untyped-def]
+def _smm_block(lo, hi, r, m, X, W, G, N, c, half):  # type: ignore[no-untyped-def]
+    """The spherical midpoint's sweep over the spins ``lo <= i < hi``, squared changes into
+    ``r``."""
     for i in range(lo, hi):
         r[i - lo] = _smm_one(m, X, W, G, N, i, i - 1, i + 1, c, half)
-
-
-@numba.njit(cache=True)
-def _smm_range(m, X, W, G, N, c, half, lo, hi, r):  # type: ignore[no-untyped-def]
-    size = min(_BLOCK, r.shape[0])
-    acc = 0.0
-    for b in range(lo, hi, size):
-        e = min(b + size, hi)
-        _smm_block(m, X, W, G, N, c, half, b, e, r)
-        acc += _sum(r, e - b)
-    return acc
 
 
 # Serial and parallel stages are twins on purpose: a short chain runs the serial one (no
@@ -227,7 +220,7 @@ def iterate_iso_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     quarter = 0.25 * hp * hp
     acc = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter)
     if N > 1:
-        acc += _iso_range(X, W, G, N, c, half, quarter, 1, N - 1, work[0])
+        acc += _blocked(_iso_block, 1, N - 1, work[0], (X, W, G, N, c, half, quarter))
         acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
     rr[0] = acc
 
@@ -246,7 +239,8 @@ def iterate_iso_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _iso_range(X, W, G, N, c, half, quarter, lo, hi, _buffer(work[0], ch, nch))
+            r = _buffer(work[0], ch, nch)
+            part[ch] = _blocked(_iso_block, lo, hi, r, (X, W, G, N, c, half, quarter))
     acc = part.sum()
     acc += _iso_one(X, W, G, N, 0, N - 1, 1, c, half, quarter)
     acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
@@ -264,7 +258,7 @@ def iterate_smm_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     _point_range(X, W, m, N, 0, N)
     acc = _smm_one(m, X, W, G, N, 0, N - 1, 1 % N, c, half)
     if N > 1:
-        acc += _smm_range(m, X, W, G, N, c, half, 1, N - 1, work[1])
+        acc += _blocked(_smm_block, 1, N - 1, work[1], (m, X, W, G, N, c, half))
         acc += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
     rr[0] = acc
 
@@ -288,7 +282,8 @@ def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _smm_range(m, X, W, G, N, c, half, lo, hi, _buffer(work[1], ch, nch))
+            r = _buffer(work[1], ch, nch)
+            part[ch] = _blocked(_smm_block, lo, hi, r, (m, X, W, G, N, c, half))
     acc = part.sum()
     acc += _smm_one(m, X, W, G, N, 0, N - 1, 1, c, half)
     acc += _smm_one(m, X, W, G, N, N - 1, N - 2, 0, c, half)
@@ -443,7 +438,7 @@ def _sto_one(X, W, G, N, i, im, ip, c, half, quarter, fields, amp, row, inv):  #
 
 
 @numba.njit(cache=True, fastmath=_STATE)
-def _sto_block(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi, r):  # type: ignore[no-untyped-def]
+def _sto_block(lo, hi, r, X, W, G, N, c, half, quarter, fields, amp, row, inv):  # type: ignore[no-untyped-def]
     """The stochastic sweep over the interior spins ``lo <= i < hi``, squared changes into
     ``r``; site noise alone (the thermal case) in a loop of its own, which vectorizes."""
     if fields.shape[0] == 0 and amp.shape[0] > 0:
@@ -454,18 +449,6 @@ def _sto_block(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi, r): 
         return
     for i in range(lo, hi):
         r[i - lo] = _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter, fields, amp, row, inv)
-
-
-@numba.njit(cache=True)
-def _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, lo, hi, r):  # type: ignore[no-untyped-def]
-    """:func:`_sto_block` block by block; the sum of the squared changes."""
-    size = min(_BLOCK, r.shape[0])
-    acc = 0.0
-    for b in range(lo, hi, size):
-        e = min(b + size, hi)
-        _sto_block(X, W, G, N, c, half, quarter, fields, amp, row, inv, b, e, r)
-        acc += _sum(r, e - b)
-    return acc
 
 
 @numba.njit(cache=True)
@@ -480,7 +463,8 @@ def iterate_sto_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     row = sd[0]
     acc = _sto_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter, fields, amp, row, inv)
     if N > 1:
-        acc += _sto_range(X, W, G, N, c, half, quarter, fields, amp, row, inv, 1, N - 1, work[0])
+        args = (X, W, G, N, c, half, quarter, fields, amp, row, inv)
+        acc += _blocked(_sto_block, 1, N - 1, work[0], args)
         acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)
     rr[0] = acc
 
@@ -502,22 +486,9 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         lo = max(ch * size, 1)
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
-            part[ch] = _sto_range(
-                X,
-                W,
-                G,
-                N,
-                c,
-                half,
-                quarter,
-                fields,
-                amp,
-                row,
-                inv,
-                lo,
-                hi,
-                _buffer(work[0], ch, nch),
-            )
+            r = _buffer(work[0], ch, nch)
+            args = (X, W, G, N, c, half, quarter, fields, amp, row, inv)
+            part[ch] = _blocked(_sto_block, lo, hi, r, args)
     acc = part.sum()
     acc += _sto_one(X, W, G, N, 0, N - 1, 1, c, half, quarter, fields, amp, row, inv)
     acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)
