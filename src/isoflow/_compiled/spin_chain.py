@@ -175,7 +175,8 @@ def _blocked(block, lo, hi, r, args):  # type: ignore[no-untyped-def]
     """A sweep over the interior spins ``lo <= i < hi`` (``1 <= lo``, ``hi <= N - 1``) block
     by block: ``block(b, e, r, *args)`` writes the squared changes of spins ``b <= i < e`` to
     the buffer ``r`` (:data:`_BLOCK` or fewer entries), summed before the next block; returns
-    the sum over the range."""
+    the sum over the range. Inlined: a sweep that passed its block function to a compiled
+    (not inlined) helper would embed the function's address, and numba would not cache it."""
     size = min(_BLOCK, r.shape[0])
     acc = 0.0
     for b in range(lo, hi, size):
