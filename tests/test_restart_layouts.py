@@ -155,8 +155,11 @@ def test_a_kill_at_any_write_resumes_bit_for_bit(tmp_path: Path, case: str) -> N
 def test_the_checkpoint_is_not_projected_again() -> None:
     """The mechanism: su(n)'s projection is not idempotent, and a restart does not apply it."""
     alg = iso.algebras.su(16)
-    W = alg.project(1.1 * alg.random(0))
-    assert alg.project(W).tobytes() != W.tobytes()  # what made restarts drift
+    # whether a state moves under a second projection depends on its bits (the trace's
+    # rounding, so on numpy's summation too): take the first of a few that does
+    states = (alg.project(1.1 * alg.random(seed)) for seed in range(50))
+    W = next((V for V in states if alg.project(V).tobytes() != V.tobytes()), None)
+    assert W is not None  # what made restarts drift
     assert alg.validate(W, project=False).tobytes() == W.tobytes()
     problem, _y0 = _euler(16)
     method = iso.IsoMP()
