@@ -302,8 +302,13 @@ class ThreadPools:
         self._token: Any = None
 
     def apply(self, plan: ThreadPlan) -> None:
-        """Make ``plan`` the counts in force (numba first: it may load its threading layer)."""
+        """Make ``plan`` the counts in force (numba first: it may load its threading layer;
+        NumPy's and SciPy's BLAS are loaded before the first limits, so that a library the
+        run loads later, such as SciPy's that numba's ``np.dot`` binds, starts limited)."""
         import numba as nb
+
+        if self.plan is None:
+            _load_blas()
 
         if self._numba_before is None:
             self._numba_before = int(nb.get_num_threads())
