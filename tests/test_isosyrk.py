@@ -228,7 +228,7 @@ def test_non_converging_solve_fails_clearly() -> None:
         {"stages": 2.0},
         {"stages": True},
         {"initial_guess": "zero"},
-        {"extrapolation_order": 6},
+        {"extrapolation_order": 8},
         {"solver": "newton"},
     ],
 )

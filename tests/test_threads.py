@@ -371,7 +371,7 @@ def probe_model(n: int = 4):
     return iso.IsospectralProblem(algebra=alg, B=B), alg.random(seed=0, scale=0.5)
 
 
-PROBE_RUN = ["--model", "test_threads:probe_model", "--dt", "0.1", "--n-steps", "20", "--quiet"]
+PROBE_RUN = ["--model", "test_threads:probe_model", "--dt", "0.1", "--n-steps", "30", "--quiet"]
 
 
 @two_cores
@@ -400,7 +400,7 @@ def test_the_thread_flags_take_effect_inside_the_loop(
 
     out = tmp_path / "run.h5"
     assert cli.main([*where, *PROBE_RUN, "--out", str(out)]) == 0  # the suite pins BLAS to 1
-    in_loop = PROBE[-40:]  # of about 70 calls; the first one checks B before the run
+    in_loop = PROBE[-40:]  # of about 80 calls; the first one checks B before the run
     assert len(PROBE) > 60 and all(t == 2 for r in in_loop for _, t in r), PROBE
     expected = {"cores": CORES, "numba": 1, "blas": 2}
     assert iso.io.info(out)["run_info"]["stats"]["threads"] == expected

@@ -156,6 +156,9 @@ class NonlinearResult:
         ``||G(x) - x||`` per member.
     status : ndarray of int
         ``STATUS_CONVERGED`` (0) or a failure code, per member.
+    gx : ndarray
+        ``G(x)``, the map's last value per member: closer to the fixed point than ``x`` by the
+        map's contraction (IsoMP extrapolates its next start from it).
     """
 
     x: Array
@@ -163,6 +166,7 @@ class NonlinearResult:
     iterations: NDArray[np.int64]
     residual: NDArray[np.float64]
     status: NDArray[np.int64]
+    gx: Array
 
     @property
     def converged(self) -> NDArray[np.bool_]:
@@ -241,6 +245,7 @@ class NonlinearSolver:
         tol = self.atol + self.rtol * scale
         floor = self.stall_rtol * scale
         aux: Array | None = None
+        gx = np.empty_like(X)
         mixer = _Anderson(self.anderson, M) if self.anderson > 0 else None
         active = np.arange(M)
         for _ in range(self.max_iter):
@@ -261,6 +266,7 @@ class NonlinearSolver:
             iters[active] += 1
             resid[active] = r
             aux[active] = aux_a
+            gx[active] = GX
             done_ok = (r <= tol_a) | ((r >= prev) & (r <= floor_a))
             non_finite = ~np.isfinite(r)
             diverged = (r > self.divergence_factor * r0) & (r > tol_a) & ~non_finite
@@ -289,6 +295,7 @@ class NonlinearSolver:
             iterations=iters.reshape(batch),
             residual=resid.reshape(batch),
             status=status.reshape(batch),
+            gx=gx.reshape(*batch, *core),
         )
 
     def _solve_single(self, prob: FixedPointProblem, X0: Array) -> NonlinearResult:
@@ -302,6 +309,7 @@ class NonlinearSolver:
         it = 0
         r = math.inf
         aux: Array | None = None
+        GX = X
         mixer = _Anderson(self.anderson, 1) if self.anderson > 0 else None
         for it in range(1, self.max_iter + 1):
             GX, aux = prob.G(X, None)
@@ -323,6 +331,7 @@ class NonlinearSolver:
             iterations=np.asarray(it, dtype=np.int64),
             residual=np.asarray(r),
             status=np.asarray(status, dtype=np.int64),
+            gx=GX,
         )
 
 

@@ -296,7 +296,7 @@ def run_unit(  # type: ignore[no-untyped-def]
                 slot = head[p] + 1
                 if slot == K:
                     slot = 0
-                push(ring[p], slot, X, Wcur)
+                push(ring[p], slot, G, Wcur)
                 head[p] = slot
                 nh[p] = min(nh[p] + 1, plan.kmax)
             if not swap:

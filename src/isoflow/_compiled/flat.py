@@ -109,8 +109,8 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
     ``X = W`` when ``nh = 0``; returns :math:`\|W\|^2`.
 
     The sum is evaluated left to right from the newest offset, as the NumPy path does
-    (:meth:`isoflow.IsoMP.initial_stage`); up to five offsets (IsoMP's default order 4) are
-    written out so the loop vectorizes.
+    (:meth:`isoflow.IsoMP.initial_stage`); the first five offsets are written out in one
+    loop and each further one adds a pass, so every loop vectorizes.
     """
     S = W.shape[0]
     K = ring.shape[0]
@@ -148,11 +148,16 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
         for i in range(S):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i])
         return sumsq(W)
+    # more offsets: the first five written out as above, each further one a pass over X
     for i in range(S):
-        e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i]
-        for q in range(5, nh):
-            e = e + coefs[nh - 1, q] * ring[(head - q) % K, i]
-        X[i] = W[i] + e
+        X[i] = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i]
+    for q in range(5, nh):
+        aq = coefs[nh - 1, q]
+        dq = ring[_back(head, q, K)]
+        for i in range(S):
+            X[i] = X[i] + aq * dq[i]
+    for i in range(S):
+        X[i] = W[i] + X[i]
     return sumsq(W)
 
 

@@ -155,7 +155,7 @@ class CompiledRunner(Runner):
         self.method = method
         self.problem = problem
         self.solver = SolverConstants.of(method.solver)
-        self.kmax = stage.offsets(method)
+        self.kmax = stage.offsets(method, problem)
         K = max(self.kmax, 1)
         self.coefs = np.zeros((K, K))
         for m in range(1, K + 1):

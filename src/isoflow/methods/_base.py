@@ -139,17 +139,23 @@ class Method:
         raise NotImplementedError
 
 
+#: The highest degree of the extrapolated initial guess (:class:`~isoflow.IsoMP`).
+MAX_EXTRAPOLATION_ORDER = 7
+
+
 def check_implicit_options(
-    solver: object, initial_guess: object, extrapolation_order: object = 0
-) -> None:
-    """Check the options the implicit methods share.
+    solver: object, initial_guess: object, extrapolation_order: object = 0,
+    *, default_order: bool = False,
+) -> None:  # fmt: skip
+    """Check the options the implicit methods share (``default_order``: ``None`` is a valid
+    ``extrapolation_order``, the space's default).
 
     Raises
     ------
     ParameterError
         ``solver`` is not a :class:`~isoflow.nonlinear.NonlinearSolver` instance,
         ``initial_guess`` is not ``"extrapolate"`` or ``"state"``, or
-        ``extrapolation_order`` is not an integer in ``[0, 5]``.
+        ``extrapolation_order`` is not an integer in ``[0, MAX_EXTRAPOLATION_ORDER]``.
     """
     if not isinstance(solver, NonlinearSolver):
         raise ParameterError(f"solver must be FixedPoint() or Newton(), got {solver!r}")
@@ -158,5 +164,8 @@ def check_implicit_options(
             f"initial_guess must be 'extrapolate' or 'state', got {initial_guess!r}"
         )
     p = extrapolation_order
-    if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or not 0 <= p <= 5:
-        raise ParameterError(f"extrapolation_order must be an integer in [0, 5], got {p!r}")
+    top = MAX_EXTRAPOLATION_ORDER
+    if p is None and default_order:
+        return
+    if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or not 0 <= p <= top:
+        raise ParameterError(f"extrapolation_order must be an integer in [0, {top}], got {p!r}")

@@ -54,11 +54,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import ParameterError
+from ..algebras import Algebra
+from ..algebras._vectors import ParticleVectors
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
 from ._base import Method, StepResult, check_implicit_options
 
-__all__ = ["IsoMP", "compensated_update", "extrapolation_weights", "pack_state", "state_parts"]
+__all__ = [
+    "IsoMP",
+    "compensated_update",
+    "default_extrapolation_order",
+    "extrapolation_weights",
+    "pack_state",
+    "state_parts",
+]
 
 Array = NDArray[Any]
 
@@ -86,16 +95,23 @@ class IsoMP(Method):
         an ``O(h^{p+2})`` error: with ``p = 3`` the paper's rigid body (``h = 0.1``) needs
         about 30-40% fewer fixed-point iterations than from ``W_k``. The first steps use the
         offsets available (none: ``W_k``). The answer is the same fixed point.
-    extrapolation_order : int
-        Polynomial degree ``p`` of the extrapolation, ``0 <= p <= 5`` (default 4; ``0`` reuses
-        the previous offset, ``X = W_k + D_{k-1}``). The method state then carries the last
-        ``p + 1`` offsets: ``(h, D_{k-1}, D_{k-2}, ...)``, newest first. The default was 3
-        until the measurement of issue 24 (one BLAS thread, ``rtol = 1e-14``): ``p = 4``
-        takes fewer iterations per step in every case measured, 3.4 against 4.3 for Euler on
-        the sphere at ``N = 512`` and 3.16 against 3.32 at ``N = 1024`` (``h ||B||_2 = 0.3``),
-        5.7 against 6.2 at ``N = 256``, 3.0 against 4.0 for the paper's rigid body; 0.74-0.97
-        of the time per simulated time from ``N = 256`` at the same energy error and Casimir
-        drift (``docs/user_guide/solvers.rst``). Each offset kept costs one state of memory.
+    extrapolation_order : int or None
+        Polynomial degree ``p`` of the extrapolation, ``0 <= p <= 7`` (``0`` reuses the
+        previous offset, ``X = W_k + D_{k-1}``). The method state then carries the last
+        ``p + 1`` offsets: ``(h, D_{k-1}, D_{k-2}, ...)``, newest first. Each offset is the
+        map's value at the accepted stage, ``G(X) - W``, which is closer to the fixed point
+        than ``X - W`` by the map's contraction, so that high orders stay above the rounding
+        of the offsets. Default ``None``: :func:`default_extrapolation_order` of the state
+        space, ``p = 6`` on matrix states below ``n = 1024`` (an iteration is a few matrix
+        products, worth many passes over the offsets) and ``p = 4`` on larger ones and on
+        particle states (spins, vortices: an iteration is itself a few passes over memory).
+        Measured (one BLAS thread, ``rtol =
+        1e-14``, ``docs/user_guide/solvers.rst``): Euler on the sphere at ``h ||B||_2 = 0.3``
+        takes 7.52, 4.42, 3.10 iterations a step at ``N = 128, 256, 512`` with ``p = 6``
+        against 8.58, 5.68, 3.38 with ``p = 4`` (0.91, 0.82, 0.92 of its time), the paper's
+        rigid body so(10) (``h = 0.1``) 2.02 against 3.01; on the spin chain the two extra
+        offsets cost about what the iteration they save does. Each offset kept costs one
+        state of memory.
     compensated : bool
         Carry the rounding error of the update ``W_{k+1} = W_k + hC`` to the next step
         (compensated summation, see the module docstring; default ``True``). The method state
@@ -113,7 +129,7 @@ class IsoMP(Method):
 
     solver: NonlinearSolver = field(default_factory=FixedPoint)
     initial_guess: Literal["extrapolate", "state"] = "extrapolate"
-    extrapolation_order: int = 4
+    extrapolation_order: int | None = None
     compensated: bool = True
 
     order: ClassVar[int] = 2
@@ -122,7 +138,9 @@ class IsoMP(Method):
     name: ClassVar[str] = "IsoMP"
 
     def __post_init__(self) -> None:
-        check_implicit_options(self.solver, self.initial_guess, self.extrapolation_order)
+        check_implicit_options(
+            self.solver, self.initial_guess, self.extrapolation_order, default_order=True
+        )
         if not isinstance(self.compensated, (bool, np.bool_)):
             raise ParameterError(f"compensated must be True or False, got {self.compensated!r}")
 
@@ -178,12 +196,20 @@ class IsoMP(Method):
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
         return None
 
-    def history(self, h: float, state: Any) -> tuple[Array, ...]:
-        """The stored stage offsets ``(D_{k-1}, D_{k-2}, ...)`` usable with step ``h``."""
+    def order_for(self, algebra: Algebra) -> int:
+        """The extrapolation order on ``algebra``: ``extrapolation_order``, or the space's
+        default (:func:`default_extrapolation_order`) when it is ``None``."""
+        if self.extrapolation_order is None:
+            return default_extrapolation_order(algebra)
+        return int(self.extrapolation_order)
+
+    def history(self, h: float, state: Any, order: int) -> tuple[Array, ...]:
+        """The stored stage offsets ``(D_{k-1}, D_{k-2}, ...)`` usable with step ``h``, at
+        most ``order + 1``."""
         if self.initial_guess != "extrapolate":
             return ()
         offsets, _ = state_parts(state, h)
-        return offsets[: self.extrapolation_order + 1]
+        return offsets[: order + 1]
 
     def initial_stage(self, y: Array, offsets: tuple[Array, ...]) -> Array:
         """``X^(0) = W_k + sum_q a_q D_{k-q}`` with the extrapolation weights ``a_q``."""
@@ -199,12 +225,13 @@ class IsoMP(Method):
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
         alg = problem.algebra
-        offsets = self.history(h, state)
+        order = self.order_for(alg)
+        offsets = self.history(h, state, order)
         X0 = self.initial_stage(y, offsets)
         res = self.solver.solve(self.stage_problem(problem, y, h), X0)
         kept: tuple[Array, ...] = ()
         if self.initial_guess == "extrapolate":
-            kept = (res.x - y, *offsets[: self.extrapolation_order])
+            kept = (res.gx - y, *offsets[:order])
         if not self.compensated:
             return StepResult.from_solve(alg.project(y + h * res.aux), res, pack_state(h, kept))
         _, E = state_parts(state, h)
@@ -254,6 +281,31 @@ def state_parts(state: Any, h: float) -> tuple[tuple[Array, ...], Array | None]:
     else:
         offsets, E = tuple(state[1:]), None
     return (offsets if state[0] == h else ()), E
+
+
+#: Matrix states from this size on get the quartic start by default (see
+#: :func:`default_extrapolation_order`).
+LARGE_MATRIX_N = 1024
+
+
+def default_extrapolation_order(algebra: Algebra) -> int:
+    """IsoMP's extrapolation order on ``algebra`` when none is given.
+
+    4 on particle states (:class:`~isoflow.algebras.ParticleVectors`: spin chains and lattices,
+    vortices), where one iteration streams the state a few times and each further offset costs
+    about as much as it saves; 6 on matrix states (and pairs or stacks of them) below
+    ``n = LARGE_MATRIX_N``, where an iteration is a few matrix products; 4 again from there:
+    a state that large carries modes whose frequency times the step is near 1, which a
+    polynomial extrapolation amplifies the more the higher its degree (Euler on the sphere at
+    ``N = 1024``, ``h ||B||_2 = 0.3``: 2.70 iterations a step with degree 4, 3.07 with 6;
+    ``docs/user_guide/solvers.rst`` has the measurements).
+    """
+    base = algebra
+    while isinstance(getattr(base, "base", None), Algebra):  # stacks and pairs of a space
+        base = base.base  # type: ignore[attr-defined]
+    if isinstance(base, ParticleVectors):
+        return 4
+    return 4 if algebra.shape[-1] >= LARGE_MATRIX_N else 6
 
 
 def extrapolation_weights(m: int) -> tuple[float, ...]:

@@ -176,5 +176,5 @@ class SphericalMidpoint(Method):
             M0 = y + state[1]
         res = self.solver.solve(self.stage_problem(problem, y, h), M0)
         y_next = alg.project(y + h * res.aux)
-        new_state = (h, res.x - y) if self.initial_guess == "extrapolate" else None
+        new_state = (h, res.gx - y) if self.initial_guess == "extrapolate" else None
         return StepResult.from_solve(y_next, res, new_state)

@@ -77,7 +77,7 @@ class StageOnLayout:
     nwork: int
 
 
-def _no_offsets(method: Any) -> int:
+def _no_offsets(method: Any, problem: Any) -> int:
     return 0
 
 
@@ -115,8 +115,9 @@ class CompiledStage:
     nwork : int
         Scratch rows per unit.
     offsets : callable
-        ``method -> int``: stage offsets kept for the extrapolated initial guess (``0``: the
-        solve starts from the state). The method state is then ``(h, D_1, D_2, ...)``, newest
+        ``(method, problem) -> int``: stage offsets kept for the extrapolated initial guess
+        (the order may depend on the problem's space; ``0``: the solve starts from the
+        state). The method state is then ``(h, D_1, D_2, ...)``, newest
         first, as :class:`isoflow.IsoMP` keeps it.
     params : callable
         ``(method, problem, layout, steps) -> tuple``: the method's parameters as the stage
@@ -150,7 +151,7 @@ class CompiledStage:
     finish: Any
     needs: frozenset[str]
     nwork: int
-    offsets: Callable[[Any], int] = _no_offsets
+    offsets: Callable[[Any, Any], int] = _no_offsets
     params: Callable[[Any, Any, Layout, tuple[float, ...]], tuple[Any, ...]] = _no_params
     begin: Any = None
     step_data: Callable[[Any, Any, StepDataRequest], Any] | None = None
@@ -198,11 +199,13 @@ def _dense_blas_rows(layout: Layout) -> int:
     return dense_planar.NWORK if layout.record.planar else dense_tiles.NWORK
 
 
-def _isomp_offsets(method: IsoMP) -> int:
-    return method.extrapolation_order + 1 if method.initial_guess == "extrapolate" else 0
+def _isomp_offsets(method: IsoMP, problem: Any) -> int:
+    if method.initial_guess != "extrapolate":
+        return 0
+    return method.order_for(problem.algebra) + 1
 
 
-def _smm_offsets(method: SphericalMidpoint) -> int:
+def _smm_offsets(method: SphericalMidpoint, problem: Any) -> int:
     return 1 if method.initial_guess == "extrapolate" else 0
 
 
@@ -273,7 +276,7 @@ register(
         split.finish,
         frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
         isomp.NWORK,
-        offsets=lambda method: _isomp_offsets(method.base),
+        offsets=lambda method, problem: _isomp_offsets(method.base, problem),
         params=split.params,
         begin=split.begin,
         step_data=_method_step_data,
