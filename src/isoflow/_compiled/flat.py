@@ -109,8 +109,8 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
     ``X = W`` when ``nh = 0``; returns :math:`\|W\|^2`.
 
     The sum is evaluated left to right from the newest offset, as the NumPy path does
-    (:meth:`isoflow.IsoMP.initial_stage`); the first five offsets are written out in one
-    loop and each further one adds a pass, so every loop vectorizes.
+    (:meth:`isoflow.IsoMP.initial_stage`); up to seven offsets are written out in one loop
+    and each further one adds a pass, so every loop vectorizes.
     """
     S = W.shape[0]
     K = ring.shape[0]
@@ -144,14 +144,29 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
         return sumsq(W)
     a4 = coefs[nh - 1, 4]
     d4 = ring[_back(head, 4, K)]
-    if nh == 5:  # IsoMP's default order 4
+    if nh == 5:  # IsoMP's order 4 (the default on particle states and large matrices)
         for i in range(S):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i])
         return sumsq(W)
-    # more offsets: the first five written out as above, each further one a pass over X
+    a5 = coefs[nh - 1, 5]
+    d5 = ring[_back(head, 5, K)]
+    if nh == 6:
+        for i in range(S):
+            e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
+            X[i] = W[i] + e
+        return sumsq(W)
+    a6 = coefs[nh - 1, 6]
+    d6 = ring[_back(head, 6, K)]
+    if nh == 7:  # IsoMP's default order 6 on matrix states
+        for i in range(S):
+            e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
+            X[i] = W[i] + (e + a6 * d6[i])
+        return sumsq(W)
+    # more offsets: the first seven written out as above, each further one a pass over X
     for i in range(S):
-        X[i] = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i]
-    for q in range(5, nh):
+        e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
+        X[i] = e + a6 * d6[i]
+    for q in range(7, nh):
         aq = coefs[nh - 1, q]
         dq = ring[_back(head, q, K)]
         for i in range(S):
@@ -163,7 +178,8 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def push(ring, slot, X, W):  # type: ignore[no-untyped-def]
-    """Store the stage offset ``X - W`` in ``ring[slot]``."""
+    """Store the stage offset ``X - W`` in ``ring[slot]`` (the driver passes the map's value
+    at the accepted stage as ``X``, see :class:`isoflow.IsoMP`)."""
     d = ring[slot]
     for i in range(W.shape[0]):
         d[i] = X[i] - W[i]
