@@ -17,7 +17,20 @@ against an older commit, and the thread scaling of one iteration.
 Run alone: ``python benchmarks/bench_21_large_n.py``. Without git or the baseline commit,
 part 1 is reported as not measured.
 
-Measured for levers 2 and 3 of issue 24 (this checkout with IsoMP's quartic start, on the
+Measured on the idle machine, 2026-11-26 (evening), one run each: before the stage offsets
+were taken from ``G(X)`` and the default degree of the start depended on the state
+(``0913063``), 0.69 at N = 512 (3.38 against 4.28 iterations a step) and 0.85 at N = 1024
+(3.18 against 3.32); after it, 0.65 and 0.65 (3.10 and 2.42 iterations a step; the old code
+read the same energy error, 6.2e-6 and 3.1e-6, and Casimir drift, below 2e-15), and 1.61x and
+1.66x on two threads. Where the time per step goes at N = 1024 (one thread, ``StepTimer``
+between the run's saves, against the stage's calls timed one by one): the iteration 222 ms
+(three full real products 124 ms, the lower-triangle products 80, the passes 13, ``B(X)``
+5), about 56 ms a step around it (the guess, the finish with its compensation, the offset);
+the half left to the target would take one iteration a step fewer again, or an iteration of
+0.5 of today's. Why not a higher degree at N = 1024: the docstring of
+``isoflow.methods.isomp.default_extrapolation_order``.
+
+Measured earlier for levers 2 and 3 of issue 24 (IsoMP's quartic start on ``X - W``, on the
 shared 2-core machine; ``uptime`` load in brackets):
 
 * Part 1 (``bench_21_large_n._against_baseline(N, 50)``, load 3.0 at N = 512, 3-5 at
