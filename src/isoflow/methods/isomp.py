@@ -291,10 +291,11 @@ LARGE_MATRIX_N = 1024
 def default_extrapolation_order(algebra: Algebra) -> int:
     """IsoMP's extrapolation order on ``algebra`` when none is given.
 
-    4 on particle states (:class:`~isoflow.algebras.ParticleVectors`: spin chains and lattices,
-    vortices), where one iteration streams the state a few times and each further offset costs
-    about as much as it saves; 6 on matrix states (and pairs or stacks of them) below
-    ``n = LARGE_MATRIX_N``, where an iteration is a few matrix products; 4 again from there:
+    4 on particle states (spaces of 3-vectors such as :func:`~isoflow.algebras.so3_vectors`:
+    spin chains and lattices, vortices), where one iteration streams the state a few times and
+    each further offset costs about as much as it saves; 6 on matrix states (and pairs or
+    stacks of them) below ``n = LARGE_MATRIX_N``, where an iteration is a few matrix products;
+    4 again from there:
     a state that large carries modes whose frequency times the step is near 1, which a
     polynomial extrapolation amplifies the more the higher its degree (Euler on the sphere at
     ``N = 1024``, ``h ||B||_2 = 0.3``: 2.70 iterations a step with degree 4, 3.07 with 6;
