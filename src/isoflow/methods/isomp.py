@@ -83,14 +83,14 @@ class IsoMP(Method):
         ``1e-14 ||W_k||``).
     initial_guess : {"extrapolate", "state"}
         Starting point of the solve. ``"state"`` is ``X = W_k`` (the paper's), an ``O(h)``
-        error. ``"extrapolate"`` (default) extrapolates the stage offset ``D = X - W`` of the
+        error. ``"extrapolate"`` (default) extrapolates the stage offset ``D = G(X) - W`` of the
         last ``p + 1`` steps by the interpolating polynomial of degree ``p`` (see
         ``extrapolation_order``),
 
         .. math::
 
             X^{(0)}_k = W_k + \sum_{q=1}^{p+1} (-1)^{q+1} \binom{p+1}{q} D_{k-q},
-            \qquad D_j = X_j - W_j,
+            \qquad D_j = G(X_j) - W_j,
 
         an ``O(h^{p+2})`` error: with ``p = 3`` the paper's rigid body (``h = 0.1``) needs
         about 30-40% fewer fixed-point iterations than from ``W_k``. The first steps use the
@@ -105,13 +105,12 @@ class IsoMP(Method):
         space, ``p = 6`` on matrix states below ``n = 1024`` (an iteration is a few matrix
         products, worth many passes over the offsets) and ``p = 4`` on larger ones and on
         particle states (spins, vortices: an iteration is itself a few passes over memory).
-        Measured (one BLAS thread, ``rtol =
-        1e-14``, ``docs/user_guide/solvers.rst``): Euler on the sphere at ``h ||B||_2 = 0.3``
-        takes 7.52, 4.42, 3.10 iterations a step at ``N = 128, 256, 512`` with ``p = 6``
-        against 8.58, 5.68, 3.38 with ``p = 4`` (0.91, 0.82, 0.92 of its time), the paper's
-        rigid body so(10) (``h = 0.1``) 2.02 against 3.01; on the spin chain the two extra
-        offsets cost about what the iteration they save does. Each offset kept costs one
-        state of memory.
+        Measured (one BLAS thread, ``rtol = 1e-14``, ``docs/user_guide/solvers.rst``): Euler
+        on the sphere at ``h ||B||_2 = 0.3`` takes 7.52, 4.42, 3.10 iterations a step at
+        ``N = 128, 256, 512`` with ``p = 6`` against 8.58, 5.68, 3.38 with ``p = 4`` (0.91,
+        0.82, 0.92 of its time), the paper's rigid body so(10) (``h = 0.1``) 2.02 against
+        3.01; on the spin chain the two extra offsets cost about what the iteration they save
+        does. Each offset kept costs one state of memory.
     compensated : bool
         Carry the rounding error of the update ``W_{k+1} = W_k + hC`` to the next step
         (compensated summation, see the module docstring; default ``True``). The method state
