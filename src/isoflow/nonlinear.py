@@ -248,7 +248,7 @@ class NonlinearSolver:
         gx = np.empty_like(X)
         mixer = _Anderson(self.anderson, M) if self.anderson > 0 else None
         active = np.arange(M)
-        for _ in range(self.max_iter):
+        for it in range(self.max_iter):
             whole = active.size == M
             mask = None if whole else _batch_mask(active, batch)
             Xa = X if whole else X[active]
@@ -266,7 +266,6 @@ class NonlinearSolver:
             iters[active] += 1
             resid[active] = r
             aux[active] = aux_a
-            gx[active] = GX
             done_ok = (r <= tol_a) | ((r >= prev) & (r <= floor_a))
             non_finite = ~np.isfinite(r)
             diverged = (r > self.divergence_factor * r0) & (r > tol_a) & ~non_finite
@@ -276,6 +275,9 @@ class NonlinearSolver:
             st[non_finite] = STATUS_NON_FINITE
             status[active] = st
             going = st == CONTINUE
+            # G at each member's last iterate: kept when it stops (or the iterations run out)
+            last = ~going if it + 1 < self.max_iter else slice(None)
+            gx[active[last]] = GX[last]
             if not going.any():
                 active = active[going]
                 break
