@@ -401,8 +401,7 @@ def thread_limits(
     else:
         request = {k: v for k, v in (("blas", blas), ("numba", numba)) if v is not None}
     plan = plan_threads(request, parallel=True)
-    _load_blas()
-    pools = ThreadPools()
+    pools = ThreadPools()  # its first apply loads NumPy's and SciPy's BLAS
     token = _REQUEST.set(request)
     try:
         pools.apply(plan)
