@@ -273,7 +273,10 @@ class StepTimer:
         the same problem without its kernel.
 
     :meth:`advance` continues from where the last call stopped, saving only the last state, so
-    a benchmark times stepping alone.
+    a benchmark times stepping alone. It runs with the thread counts a solve of the same run
+    would (the enclosing :func:`isoflow.threads.thread_limits` block's, else the default: one
+    BLAS thread), applied to every BLAS library as a solve applies them; without them, SciPy's
+    OpenBLAS (the one the compiled dense loops call) kept its default of one thread per core.
     """
 
     def __init__(self, problem: Any, method: Any, y: Any, h: float, *, compiled: bool = True):
@@ -293,10 +296,17 @@ class StepTimer:
 
     def advance(self, n: int) -> int:
         """Take ``n`` steps; returns the nonlinear iterations they took (all members)."""
+        from isoflow.threads import ThreadPools, plan_threads
+
         r = self.runner
         before = r.iterations_total
         out = np.empty((1, r.M, *r.core), dtype=self.dtype)
-        r.advance(n, SaveGrid(2**62, r.k + n), out)
+        pools = ThreadPools()
+        try:
+            pools.apply(plan_threads(None, parallel=r.parallel))
+            r.advance(n, SaveGrid(2**62, r.k + n), out)
+        finally:
+            pools.restore()
         if not r.failures.alive.all():
             m = int(r.failures.failed[0])
             raise RuntimeError(f"a benchmark run failed ({r.label}): {r.failures.reason(m)}")
