@@ -77,11 +77,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._errors import ParameterError
+from ..algebras import Algebra
 from ..algebras.stacked import Stacked
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
 from ._base import Method, StepResult, check_implicit_options
-from .isomp import extrapolation_weights
+from .isomp import default_extrapolation_order, extrapolation_weights
 
 __all__ = ["IsoSyRK", "gauss_legendre"]
 
@@ -132,10 +133,17 @@ class IsoSyRK(Method):
     initial_guess : {"extrapolate", "state"}
         ``"state"``: every stage starts at :math:`W_k`. ``"extrapolate"`` (default): from the
         predictor :math:`W_k + c_i h [B(W_k), W_k]` (an ``O(h^2)`` guess) on the first step,
-        then from the stage offsets :math:`D = \widetilde W - W` of the previous steps,
+        then from the stage offsets :math:`D = G(\widetilde W) - W` of the previous steps (the
+        map's value at the accepted stages, as :class:`~isoflow.IsoMP` keeps them),
         extrapolated as in :class:`~isoflow.IsoMP` (``extrapolation_order``).
-    extrapolation_order : int
-        Polynomial degree ``0 <= p <= 5`` of that extrapolation (default 3).
+    extrapolation_order : int or None
+        Polynomial degree ``0 <= p <= 7`` of that extrapolation. Default ``None``: IsoMP's
+        default for the state space (:func:`~isoflow.methods.isomp.default_extrapolation_order`:
+        6 on matrix states below ``n = 1024``, else 4). Measured (NumPy path, one BLAS
+        thread, ``rtol = 1e-14``), iterations a step with ``s = 2`` against the cubic start on
+        ``X - W`` used before: the rigid body so(10), ``h = 0.1``: 2.05 against 4.02; so(3):
+        1.77 against 2.01; Euler on the sphere at ``h ||B||_2 = 0.3``: 7.74 against 8.52
+        (``N = 32``) and 4.20 against 5.10 (``N = 96``).
 
     Attributes
     ----------
@@ -172,7 +180,7 @@ class IsoSyRK(Method):
     stages: int = 2
     solver: NonlinearSolver = field(default_factory=FixedPoint)
     initial_guess: Literal["extrapolate", "state"] = "extrapolate"
-    extrapolation_order: int = 3
+    extrapolation_order: int | None = None
 
     implicit: ClassVar[bool] = True
     symmetric: ClassVar[bool] = True
@@ -181,7 +189,9 @@ class IsoSyRK(Method):
         s = self.stages
         if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s not in (1, 2, 3):
             raise ParameterError(f"IsoSyRK: stages must be 1, 2 or 3, got {s!r}")
-        check_implicit_options(self.solver, self.initial_guess, self.extrapolation_order)
+        check_implicit_options(
+            self.solver, self.initial_guess, self.extrapolation_order, default_order=True
+        )
 
     @property  # type: ignore[misc]
     def order(self) -> int:  # type: ignore[override]
@@ -195,6 +205,14 @@ class IsoSyRK(Method):
     def tableau(self) -> tuple[Array, Array, Array]:
         """The Gauss–Legendre tableau ``(A, b, c)``."""
         return gauss_legendre(int(self.stages))
+
+    def order_for(self, algebra: Algebra) -> int:
+        """The extrapolation order on ``algebra``: ``extrapolation_order``, or IsoMP's default
+        for the space (:func:`~isoflow.methods.isomp.default_extrapolation_order`) when it is
+        ``None``."""
+        if self.extrapolation_order is None:
+            return default_extrapolation_order(algebra)
+        return int(self.extrapolation_order)
 
     # ---- the stage equations -----------------------------------------------------------------
     def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:
@@ -226,7 +244,7 @@ class IsoSyRK(Method):
             return Y
         offsets = ()
         if state is not None and len(state) >= 2 and state[0] == h:
-            offsets = tuple(state[1 : self.extrapolation_order + 2])
+            offsets = tuple(state[1 : self.order_for(alg) + 2])
         if offsets:
             a = extrapolation_weights(len(offsets))
             E = a[0] * offsets[0]
@@ -250,10 +268,10 @@ class IsoSyRK(Method):
         y_next = alg.project(y + h * incr)
         new_state = None
         if self.initial_guess == "extrapolate":
-            D = res.x - np.expand_dims(y, axis)
+            D = res.gx - np.expand_dims(y, axis)
             old = ()
             if state is not None and len(state) >= 2 and state[0] == h:
-                old = tuple(state[1 : self.extrapolation_order + 1])
+                old = tuple(state[1 : self.order_for(alg) + 1])
             new_state = (h, D, *old)
         return StepResult.from_solve(y_next, res, new_state)
 
