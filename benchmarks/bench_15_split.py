@@ -10,9 +10,12 @@ entries: in flops a small fraction of the two complex ``N x N`` products of each
 iterations. The iterations per step are reported too; the ratio per iteration is the cost of
 the split itself.
 
-**Not met; how far and why.** Measured on the idle machine (2026-11-26, ``python
-benchmarks/run_all.py --only 3,15,16``): 1.50, 1.87, 2.04 at ``N = 256, 512, 1024`` (the same
-5, 3 and 2 iterations a step for both; 13, 85 and 457 ms a step for the two half steps). An
+**Not met; how far and why.** Measured on the idle machine (2026-11-26, 23:44 UTC, ``python
+benchmarks/run_all.py --only 15,17``, one BLAS thread as a solve runs): 1.25, 1.53, 1.56 at
+``N = 256, 512, 1024`` (the same 4, 2.5 and 2 iterations a step for both; 5, 59 and 323 ms a
+step for the two half steps). An earlier run read 1.50, 1.87, 2.04 (13, 85 and 457 ms for the
+half steps) while the timer left SciPy's OpenBLAS at two threads, which sped up the ideal step
+only. An
 earlier quick run (``N = 128, 256``, machine shared, cubic start) read 1.13 and 1.22: since
 IsoMP's start became quartic, the ideal step takes fewer iterations and the half steps weigh
 more. A half step reads the folded per-diagonal matrices once, about ``N^3 / 12`` doubles

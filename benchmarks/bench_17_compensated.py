@@ -19,6 +19,10 @@ once more (48 bytes a spin against about 70 an iteration), which no arrangement 
 arithmetic removes. The sphere's ratio at ``N = 256`` (1.03 committed) is within its
 run-to-run noise (0.78-1.03). The plain update stays one keyword away
 (``iso.IsoMP(compensated=False)``); the solvers guide says when a run may take it.
+Since IsoMP's start takes the offsets from ``G(X)`` (two iterations a step on the so(10) rigid
+body instead of three) the plain step is cheaper and the same buffer weighs more: two runs on
+the idle machine (2026-11-26, 23:44 and 23:51 UTC) read 0.98 / 1.01 (so(10)), 1.03 / 0.98
+(sphere), 1.09 / 1.16 (ensemble), 1.08 / 1.09 (chain).
 """
 
 from __future__ import annotations
