@@ -370,6 +370,36 @@ def test_non_finite_state_fails_like_numpy() -> None:
     assert a.failures.step[0] == 0 and a.k == 0
 
 
+@pytest.mark.parametrize("compensated", [False, True])
+def test_lanes_update_reports_each_non_finite_lane(compensated: bool) -> None:
+    """The lanes' update flags exactly the lanes holding an infinite or NaN entry (real or
+    imaginary part), not those whose finite parts are near the overflow threshold."""
+    import numba
+
+    from isoflow._compiled import lanes
+
+    @numba.njit
+    def advance(lay, W, h, C, E, Wn, fin):  # type: ignore[no-untyped-def]
+        lanes._advance_state(lay, W, h, C, E, Wn, fin)
+
+    n, L = 2, lanes.LANES
+    lay = lanes.ElementwiseLanes(n, -1.0, False, L, np.ones((n, n)))
+    W = np.zeros((n, n, L), dtype=complex)
+    C = np.zeros((n, n, L), dtype=complex)
+    W[0, 1, 1] = 1.7e308  # + h C overflows the real part
+    C[0, 1, 1] = 1.7e308
+    W[1, 0, 2] = complex(0.0, np.nan)
+    C[1, 1, 3] = complex(0.0, -np.inf)
+    W[1, 1, 4] = complex(1.7e308, 1.7e308)  # finite, near the threshold in both parts
+    W[0, 0, 5] = complex(-1.7e308, 1.0)
+    E = np.zeros(W.size if compensated else 0, dtype=complex)
+    Wn = np.empty(W.size, dtype=complex)
+    fin = np.ones(L, dtype=np.bool_)
+    advance(lay, W.reshape(-1), 1.0, C.reshape(-1), E, Wn, fin)
+    assert [q for q in range(L) if not fin[q]] == [1, 2, 3]
+    assert Wn.reshape(n, n, L)[1, 1, 4] == complex(1.7e308, 1.7e308)
+
+
 def test_user_function_that_raises_fails_the_run_with_it_as_cause() -> None:
     alg = iso.algebras.so(5)
     d = np.arange(1.0, 6.0)
