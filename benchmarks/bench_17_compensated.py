@@ -24,7 +24,7 @@ body instead of three) the plain step is cheaper and the same buffer weighs more
 the idle machine (2026-11-26, 23:44 and 23:51 UTC) read 0.98 / 1.01 (so(10)), 1.03 / 0.98
 (sphere), 1.09 / 1.16 (ensemble), 1.08 / 1.09 (chain). The ensemble's lanes then tested each
 entry of the update for finiteness with a branch, which kept the compensated loop from
-vectorizing; with a branch-free test (``c47802c``) the row read 1.04 (00:11 UTC), the chain's
+vectorizing; with a branch-free test (``c47802c``) the row read 1.04 (00:07-00:08 UTC), the chain's
 1.16.
 """
 
