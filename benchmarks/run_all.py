@@ -16,12 +16,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+# numba's cache: the checkout's own, emptied when the compiled sources changed (numba alone
+# would load a loop compiled before an inlined block changed), set before numba is imported
+if "NUMBA_CACHE_DIR" not in os.environ:
+    from isoflow._numba_cache import refresh
+
+    os.environ["NUMBA_CACHE_DIR"] = str(Path(__file__).resolve().parents[1] / ".numba_cache")
+    refresh(Path(os.environ["NUMBA_CACHE_DIR"]))
 
 import suite
 

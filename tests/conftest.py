@@ -4,20 +4,20 @@ and keep numba's on-disk cache (``.numba_cache``) true to the sources.
 numba's cache checks only the file that defines a function: a compiled loop that inlines a
 block from another module (every stage inlines its layout's blocks) is loaded stale from the
 cache after that block changes. So the cache is emptied whenever the compiled layer's sources
-differ from those it was filled from (a digest in ``.numba_cache/SOURCES``), once per test
+differ from those it was filled from (:func:`isoflow._numba_cache.refresh`), once per test
 session (by the controlling process, before any worker starts).
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
-import shutil
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
 from threadpoolctl import threadpool_limits
+
+from isoflow._numba_cache import refresh
 
 #: Whether the cache is this repository's own (a cache the user chose is left alone).
 _OWN_CACHE = "NUMBA_CACHE_DIR" not in os.environ
@@ -25,34 +25,11 @@ os.environ.setdefault(
     "NUMBA_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".numba_cache")
 )
 
-#: The sources whose functions other modules' compiled code inlines.
-_INLINED = ("_compiled", "_kernel_fields.py", "sphere/compiled.py")
-
-
-def _compiled_sources_digest() -> str:
-    src = Path(__file__).resolve().parent.parent / "src" / "isoflow"
-    files: list[Path] = []
-    for name in _INLINED:
-        p = src / name
-        files.extend(sorted(p.rglob("*.py")) if p.is_dir() else [p] if p.exists() else [])
-    h = hashlib.sha256()
-    for f in files:
-        h.update(str(f.relative_to(src)).encode() + b"\0" + f.read_bytes() + b"\0")
-    return h.hexdigest()
-
 
 def pytest_configure(config: pytest.Config) -> None:
     if not _OWN_CACHE or os.environ.get("PYTEST_XDIST_WORKER"):  # the controller did it
         return
-    cache = Path(os.environ["NUMBA_CACHE_DIR"])
-    stamp = cache / "SOURCES"
-    digest = _compiled_sources_digest()
-    if stamp.exists() and stamp.read_text().strip() == digest:
-        return
-    if cache.exists():
-        shutil.rmtree(cache, ignore_errors=True)
-    cache.mkdir(parents=True, exist_ok=True)
-    stamp.write_text(digest + "\n")
+    refresh(Path(os.environ["NUMBA_CACHE_DIR"]))
 
 
 _limits = threadpool_limits(limits=1)
