@@ -66,6 +66,7 @@ __all__ = [
     "default_extrapolation_order",
     "extrapolation_weights",
     "pack_state",
+    "resolve_extrapolation_order",
     "state_parts",
 ]
 
@@ -198,9 +199,7 @@ class IsoMP(Method):
     def order_for(self, algebra: Algebra) -> int:
         """The extrapolation order on ``algebra``: ``extrapolation_order``, or the space's
         default (:func:`default_extrapolation_order`) when it is ``None``."""
-        if self.extrapolation_order is None:
-            return default_extrapolation_order(algebra)
-        return int(self.extrapolation_order)
+        return resolve_extrapolation_order(self.extrapolation_order, algebra)
 
     def history(self, h: float, state: Any, order: int) -> tuple[Array, ...]:
         """The stored stage offsets ``(D_{k-1}, D_{k-2}, ...)`` usable with step ``h``, at
@@ -306,6 +305,12 @@ def default_extrapolation_order(algebra: Algebra) -> int:
     if isinstance(base, ParticleVectors):
         return 4
     return 4 if algebra.shape[-1] >= LARGE_MATRIX_N else 6
+
+
+def resolve_extrapolation_order(order: int | None, algebra: Algebra) -> int:
+    """``order``, or :func:`default_extrapolation_order` of ``algebra`` when it is ``None``
+    (the rule of every method with an extrapolated start)."""
+    return default_extrapolation_order(algebra) if order is None else int(order)
 
 
 def extrapolation_weights(m: int) -> tuple[float, ...]:

@@ -82,7 +82,7 @@ from ..algebras.stacked import Stacked
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
 from ._base import Method, StepResult, check_implicit_options
-from .isomp import default_extrapolation_order, extrapolation_weights
+from .isomp import extrapolation_weights, resolve_extrapolation_order
 
 __all__ = ["IsoSyRK", "gauss_legendre"]
 
@@ -210,9 +210,7 @@ class IsoSyRK(Method):
         """The extrapolation order on ``algebra``: ``extrapolation_order``, or IsoMP's default
         for the space (:func:`~isoflow.methods.isomp.default_extrapolation_order`) when it is
         ``None``."""
-        if self.extrapolation_order is None:
-            return default_extrapolation_order(algebra)
-        return int(self.extrapolation_order)
+        return resolve_extrapolation_order(self.extrapolation_order, algebra)
 
     # ---- the stage equations -----------------------------------------------------------------
     def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:
