@@ -10,25 +10,23 @@ entries: in flops a small fraction of the two complex ``N x N`` products of each
 iterations. The iterations per step are reported too; the ratio per iteration is the cost of
 the split itself.
 
-**Not met; how far and why.** Measured on the idle machine (2026-11-26, 23:44 UTC, ``python
-benchmarks/run_all.py --only 15,17``, one BLAS thread as a solve runs): 1.25, 1.53, 1.56 at
-``N = 256, 512, 1024`` (the same 4, 2.5 and 2 iterations a step for both; 5, 59 and 323 ms a
-step for the two half steps). An earlier run read 1.50, 1.87, 2.04 (13, 85 and 457 ms for the
-half steps) while the timer left SciPy's OpenBLAS at two threads, which sped up the ideal step
-only. An
-earlier quick run (``N = 128, 256``, machine shared, cubic start) read 1.13 and 1.22: since
-IsoMP's start became quartic, the ideal step takes fewer iterations and the half steps weigh
-more. A half step reads the folded per-diagonal matrices once, about ``N^3 / 12`` doubles
-(11 MB at N = 256, 90 MB at 512, 0.7 GB at 1024), in packed symmetric products
-(``isoflow.sphere.compiled._symmetric_product``) that run at about 2.4 ns a stored entry
-(measured alone at ``k = 512``, in cache): about seven cycles an entry, scalar, well above the
-memory bound, so one half step at ``N = 1024`` costs about as much as an IsoMP iteration.
-Gathering the diagonals in cache-sized tiles changed this by 0-8 %. The known ways to 1.10:
-a product that vectorizes (its two reductions and two updates a row share their loads; a
-row-then-column split of the same product measured slower, 3.2 ns an entry), merging the two
-half steps of consecutive steps between saves (``S_{h/2} S_{h/2} = S_h``: half the traffic),
-or applying ``exp(-tau c(T_m))`` through the tridiagonal ``T_m`` of each diagonal (``O(N^2)``
-per application, no stored matrices) where ``tau c`` is moderate.
+**Not met; how far and why.** Measured on the idle machine (2026-11-27, 01:50 UTC, ``python
+benchmarks/run_all.py --only 15``, one BLAS thread as a solve runs): 1.27, 1.43, 1.50 at
+``N = 256, 512, 1024`` (4, 2.5 and 2 iterations a step for both; 5, 44 and 267 ms a step for
+the two half steps). The run before the per-diagonal product took four rows at a time read
+1.25, 1.53, 1.56 (5, 59 and 323 ms). A half step reads the folded per-diagonal matrices
+once, about ``N^3 / 12`` doubles (11 MB at N = 256, 90 MB at 512, 0.7 GB at 1024), in packed
+symmetric products (``isoflow.sphere.compiled._symmetric_product``). Four rows at a time
+share each load of ``y`` and ``x`` and the column part vectorizes: 0.5 ns a stored entry with
+the matrix in cache at ``k = 512``, against 1.5 for the row-at-a-time product before; from
+memory, as a half step streams them, about 1.0 ns (a half step alone at ``N = 1024``: 101 ms
+against 140, its products 91 ms; the matrices alone are summed in 22 ms), so the stream, not
+the arithmetic, now bounds it, and a half step at ``N = 1024`` costs about half an IsoMP
+iteration. The known ways to 1.10: merging the two half steps of consecutive steps between
+saves (``S_{h/2} S_{h/2} = S_h``: half the traffic, with a second set of matrices for ``h``
+and the pre-half-step state carried across chunks and checkpoints so that resumes stay bit
+for bit), or applying ``exp(-tau c(T_m))`` through the tridiagonal ``T_m`` of each diagonal
+(``O(N^2)`` per application, no stored matrices) where ``tau c`` is moderate.
 Target: time per step, split / ideal, at most 1.10. Run alone:
 ``python benchmarks/bench_15_split.py [--quick]``.
 """
