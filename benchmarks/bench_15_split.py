@@ -10,23 +10,26 @@ entries: in flops a small fraction of the two complex ``N x N`` products of each
 iterations. The iterations per step are reported too; the ratio per iteration is the cost of
 the split itself.
 
-**Not met; how far and why.** Measured on the idle machine (2026-11-27, 01:50 UTC, ``python
-benchmarks/run_all.py --only 15``, one BLAS thread as a solve runs): 1.27, 1.43, 1.50 at
-``N = 256, 512, 1024`` (4, 2.5 and 2 iterations a step for both; 5, 44 and 267 ms a step for
-the two half steps). The run before the per-diagonal product took four rows at a time read
-1.25, 1.53, 1.56 (5, 59 and 323 ms). A half step reads the folded per-diagonal matrices
-once, about ``N^3 / 12`` doubles (11 MB at N = 256, 90 MB at 512, 0.7 GB at 1024), in packed
-symmetric products (``isoflow.sphere.compiled._symmetric_product``). Four rows at a time
-share each load of ``y`` and ``x`` and the column part vectorizes: 0.5 ns a stored entry with
-the matrix in cache at ``k = 512``, against 1.5 for the row-at-a-time product before; from
-memory, as a half step streams them, about 1.0 ns (a half step alone at ``N = 1024``: 101 ms
-against 140, its products 91 ms; the matrices alone are summed in 22 ms), so the stream, not
-the arithmetic, now bounds it, and a half step at ``N = 1024`` costs about half an IsoMP
-iteration. The known ways to 1.10: merging the two half steps of consecutive steps between
-saves (``S_{h/2} S_{h/2} = S_h``: half the traffic, with a second set of matrices for ``h``
-and the pre-half-step state carried across chunks and checkpoints so that resumes stay bit
-for bit), or applying ``exp(-tau c(T_m))`` through the tridiagonal ``T_m`` of each diagonal
-(``O(N^2)`` per application, no stored matrices) where ``tau c`` is moderate.
+**Not met; how far and why.** Measured on the idle machine (2026-11-27, 01:41 UTC, ``python
+benchmarks/run_all.py --only 15``, one BLAS thread as a solve runs): 1.18, 1.23, 1.30 at
+``N = 256, 512, 1024`` (4, 2.5 and 2 iterations a step for both; 3.5, 24 and 164 ms a step
+for the two half steps). Earlier the same day, before the per-diagonal product took its rows
+in pairs and the split step stopped checking its forcing patterns on every call of the
+compiled loop (about 30 ms a call at ``N = 1024``): 1.25, 1.53, 1.56 (5, 59 and 323 ms).
+A half step reads the folded per-diagonal matrices once, about ``N^3 / 12`` doubles (11 MB
+at N = 256, 90 MB at 512, 0.7 GB at 1024), in packed symmetric products
+(``isoflow.sphere.compiled._symmetric_product``). Measured alone at ``N = 1024`` with the
+matrices streamed from memory (every diagonal's products, one thread): one row at a time
+128 ms, rows in pairs 68 ms, four rows at a time 90 ms (the fastest in cache, 0.50 ns a
+stored entry at ``k = 512`` against 0.53 for pairs and 1.5 for one row, but not from
+memory); the matrices alone are summed in 22 ms. So a half step at ``N = 1024`` (79 ms) costs
+about a third of an IsoMP iteration. The known ways to 1.10: merging the two half steps of
+consecutive steps between saves (the matrices of a diagonal applied twice while in cache:
+half the traffic; the pre-half-step state must then be carried across chunks, failures and
+checkpoints so that resumes stay bit for bit, and a time-dependent forcing needs the next
+step's data in the finish), or applying ``exp(-tau c(T_m))`` through the tridiagonal ``T_m``
+of each diagonal (``O(N^2)`` per application, no stored matrices) where ``tau c`` is
+moderate.
 Target: time per step, split / ideal, at most 1.10. Run alone:
 ``python benchmarks/bench_15_split.py [--quick]``.
 """

@@ -50,9 +50,10 @@ def test_linear_step_decays_every_harmonic_exactly() -> None:
 
 @pytest.mark.parametrize("k", [*range(14), 31, 64])
 def test_packed_symmetric_product_matches_the_dense_product(k: int) -> None:
-    """The per-diagonal kernel's product (four rows at a time, then the last ``k mod 4``)
-    against ``M @ x`` for every remainder, the matrix stored at an offset inside a larger
-    buffer, and ``y`` overwritten whatever it held."""
+    """The per-diagonal kernel's product (rows in pairs, then a last odd row; the inner
+    products split by the parity of ``j``) against ``M @ x`` for even and odd sizes, the
+    matrix stored at an offset inside a larger buffer, and ``y`` overwritten whatever it
+    held."""
     from isoflow.sphere.compiled import _symmetric_product
 
     rng = np.random.default_rng(k)
@@ -70,8 +71,8 @@ def test_packed_symmetric_product_matches_the_dense_product(k: int) -> None:
 
 
 def test_per_diagonal_kernel_matches_the_numpy_flow_at_moderate_n() -> None:
-    """At ``N = 41`` (folded blocks of up to 21 rows: the kernel's four-row blocks and its
-    remainders) the compiled half step equals :meth:`SphereDissipation.flow` to rounding."""
+    """At ``N = 41`` (folded blocks of up to 21 rows, even and odd) the compiled half step
+    equals :meth:`SphereDissipation.flow` to rounding."""
     from isoflow.sphere.compiled import dissipate
 
     n = 41
@@ -109,6 +110,28 @@ def test_split_step_with_B_zero_is_the_exact_flow(compiled: bool) -> None:
     assert part is not None
     exact = part.flow(W0, n * h) + part.integral(F, n * h)
     assert float(np.abs(sol.ys[-1] - exact).max()) < 1e-13
+
+
+@pytest.mark.parametrize("alpha", [0.0, 0.7])
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_one_rate_on_every_degree_scales_the_state(compiled: bool, alpha: float) -> None:
+    """A linear drag alone (or no rate, with a forcing) is the scaling ``e^{-alpha t}``: with
+    ``B = 0`` the split run is ``e^{-alpha t} W_0 + (1 - e^{-alpha t}) / alpha F`` to rounding,
+    and no per-diagonal matrices are built for it."""
+    F = iso.algebras.su(N).random(seed=6)
+    part = SphereDissipation(N, np.full(N, alpha))
+    assert part.uniform_rate == alpha
+    prob, W0 = _zero_B_problem(iso.Forcing(F))
+    prob = dataclasses.replace(prob, linear_part=part)
+    prob = prob if compiled else _numpy(prob)
+    h, n = 0.2, 10
+    sol = iso.solve(prob, iso.Strang(), W0, dt=h, n_steps=n, save_every=n, progress=False)
+    assert ("compiled" in sol.stats.runner) == compiled
+    t = n * h
+    ramp = -np.expm1(-alpha * t) / alpha if alpha else t
+    exact = np.exp(-alpha * t) * W0 + ramp * F
+    assert float(np.abs(sol.ys[-1] - exact).max()) < 1e-14
+    assert not part._packed  # the O(N^3) matrices were never formed
 
 
 @pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])

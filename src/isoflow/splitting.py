@@ -402,10 +402,13 @@ def half_step(problem: IsospectralProblem, tau: float) -> HalfStep:
     )
 
 
-def data_widths(problem: IsospectralProblem) -> tuple[int, int]:
+def data_widths(
+    problem: IsospectralProblem, terms: tuple[Deterministic, Stochastic] | None = None
+) -> tuple[int, int]:
     """``(R_d, R_s)``: the time-dependent amplitudes and the noise modes of a half step (the
-    step data of a split step holds ``2 (R_d + R_s)`` numbers per member)."""
-    det, sto = split_terms(problem)
+    step data of a split step holds ``2 (R_d + R_s)`` numbers per member); ``terms``: the
+    problem's :func:`split_terms` if at hand (they check every pattern against the space)."""
+    det, sto = split_terms(problem) if terms is None else terms
     rd = sum(len(P) for f, P in det if f.time_dependent)
     rs = sum(len(m) for _, m, _ in sto)
     return rd, rs

@@ -24,7 +24,15 @@ from numpy.typing import NDArray
 from .._errors import ParameterError
 from ..noise import standard_normals
 from ..problems import IsospectralProblem
-from ..splitting import FORCING_STREAM, HalfStep, data_widths, half_step, split_terms
+from ..splitting import (
+    FORCING_STREAM,
+    Deterministic,
+    HalfStep,
+    Stochastic,
+    data_widths,
+    half_step,
+    split_terms,
+)
 from ._base import Method, StepDataRequest, StepResult
 from .isomp import IsoMP
 
@@ -64,6 +72,9 @@ class Strang(Method):
     base: Method = field(default_factory=IsoMP)
     _cache: dict[float, tuple[IsospectralProblem, HalfStep]] = field(
         default_factory=dict, init=False, repr=False, compare=False
+    )
+    _terms_cache: list[tuple[IsospectralProblem, tuple[Deterministic, Stochastic]]] = field(
+        default_factory=list, init=False, repr=False, compare=False
     )
 
     reads_step_data: ClassVar[bool] = True
@@ -111,16 +122,26 @@ class Strang(Method):
         self._cache[tau] = (problem, terms)
         return terms
 
+    def _terms(self, problem: IsospectralProblem) -> tuple[Deterministic, Stochastic]:
+        """:func:`~isoflow.splitting.split_terms` of ``problem``, kept for the last problem:
+        checking the patterns against the space costs passes over ``N^2`` numbers, which
+        every chunk of a run and every NumPy step would otherwise repeat."""
+        if self._terms_cache and self._terms_cache[0][0] is problem:
+            return self._terms_cache[0][1]
+        terms = split_terms(problem)
+        self._terms_cache[:] = [(problem, terms)]
+        return terms
+
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
         """``(nsteps, members, 2 (R_d + R_s))``: per half step the time-dependent amplitudes
         at its midpoint, then the standard normals of its noise modes (first half, second
         half; :func:`isoflow.splitting.data_widths`)."""
-        rd, rs = data_widths(problem)
+        det, sto = self._terms(problem)
+        rd, rs = data_widths(problem, (det, sto))
         members = np.asarray(request.members, dtype=np.int64).reshape(-1)
         n, h = int(request.nsteps), float(request.h)
         out = np.zeros((n, members.size, 2 * (rd + rs)))
         if rd:
-            det, _ = split_terms(problem)
             for s in range(n):
                 t = request.t0 + (request.k0 + s) * h
                 for half, tm in enumerate((t + 0.25 * h, t + 0.75 * h)):
@@ -129,7 +150,6 @@ class Strang(Method):
                     )
                     out[s, :, half * (rd + rs) : half * (rd + rs) + rd] = a
         if rs:
-            _, sto = split_terms(problem)
             col = 0
             for f, modes, _ in sto:
                 r = modes.size
@@ -169,7 +189,7 @@ class Strang(Method):
     ) -> StepResult:
         if problem.linear_part is None and not problem.forcing:
             return self.base.step(problem, y, h, state)
-        rd, rs = data_widths(problem)
+        rd, rs = data_widths(problem, self._terms(problem))
         if rd + rs and data is None:
             raise ParameterError(
                 f"{self.name}: the forcing has time-dependent amplitudes or noise, which are "

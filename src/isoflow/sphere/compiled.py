@@ -285,79 +285,65 @@ def _symmetric_product(P, off, k, xr, xi, yr, yi):  # type: ignore[no-untyped-de
     """``y = M x`` for the symmetric ``k x k`` matrix ``M`` stored as its upper triangle, row
     by row, at ``P[off:]``, and a complex ``x`` given by its real and imaginary parts.
 
-    The rows are taken four at a time (``i .. i + 3``). Their parts right of the ``4 x 4``
-    diagonal block serve twice while in the L1 cache: as columns, ``y_j += sum_q M_{i+q, j}
-    x_{i+q}`` (``j >= i + 4``: one load and store of ``y_j`` for four entries, a loop that
+    The rows are taken in pairs ``(i, i + 1)``. Their parts right of the ``2 x 2`` diagonal
+    block serve twice while in the L1 cache: as columns, ``y_j += M_{i,j} x_i + M_{i+1,j}
+    x_{i+1}`` (``j >= i + 2``: one load and store of ``y_j`` for two entries, a loop that
     vectorizes without reassociation), and as rows, eight running inner products (real and
-    imaginary parts of four rows) that share each load of ``x_j``. The diagonal block and the
-    last ``k mod 4`` rows are summed plainly. About 0.5 ns a stored entry at ``k = 512`` against
-    1.5 for one row at a time (benchmark 15's docstring). No reassociation: the result moves
-    the state, and with ``reassoc`` its rounding could depend on how LLVM compiled the loop in
-    a given process (a run and its resume would then differ).
+    imaginary parts of the two rows, even and odd ``j`` apart) that share each load of ``x_j``.
+    A last odd row is its diagonal entry. Measured at ``N = 1024``, the matrices streamed from
+    memory as a half step does: 68 ms for every diagonal's products against 128 for one row at
+    a time and 90 for four rows at a time (which is faster only in cache: 0.50 ns a stored
+    entry at ``k = 512`` against 0.53). No reassociation: the result moves the state, and with
+    ``reassoc`` its rounding could depend on how LLVM compiled the loop in a given process (a
+    run and its resume would then differ).
     """
     for i in range(k):
         yr[i] = 0.0
         yi[i] = 0.0
     o0 = off
     i = 0
-    while i + 3 < k:
-        o1 = o0 + k - i  # row i + q of the triangle starts at oq (its diagonal entry)
-        o2 = o1 + k - i - 1
-        o3 = o2 + k - i - 2
-        p0 = P[o0 + 4 : o0 + k - i]  # M[i + q, i + 4 : k]
-        p1 = P[o1 + 3 : o1 + k - i - 1]
-        p2 = P[o2 + 2 : o2 + k - i - 2]
-        p3 = P[o3 + 1 : o3 + k - i - 3]
-        cr = yr[i + 4 : k]
-        ci = yi[i + 4 : k]
-        ur = xr[i + 4 : k]
-        ui = xi[i + 4 : k]
-        x0r, x1r, x2r, x3r = xr[i], xr[i + 1], xr[i + 2], xr[i + 3]
-        x0i, x1i, x2i, x3i = xi[i], xi[i + 1], xi[i + 2], xi[i + 3]
-        for t in range(p0.shape[0]):
-            cr[t] += (p0[t] * x0r + p1[t] * x1r) + (p2[t] * x2r + p3[t] * x3r)
-            ci[t] += (p0[t] * x0i + p1[t] * x1i) + (p2[t] * x2i + p3[t] * x3i)
-        r0 = s0 = r1 = s1 = r2 = s2 = r3 = s3 = 0.0
-        for t in range(p0.shape[0]):
-            u = ur[t]
-            v = ui[t]
-            r0 += p0[t] * u
-            s0 += p0[t] * v
-            r1 += p1[t] * u
-            s1 += p1[t] * v
-            r2 += p2[t] * u
-            s2 += p2[t] * v
-            r3 += p3[t] * u
-            s3 += p3[t] * v
-        # the diagonal block: M[i + q, i + c] is stored in row min(q, c) at |q - c|
-        d0, d1, d2, d3 = P[o0], P[o1], P[o2], P[o3]
-        m01, m02, m03 = P[o0 + 1], P[o0 + 2], P[o0 + 3]
-        m12, m13, m23 = P[o1 + 1], P[o1 + 2], P[o2 + 1]
-        yr[i] += ((d0 * x0r + m01 * x1r) + (m02 * x2r + m03 * x3r)) + r0
-        yi[i] += ((d0 * x0i + m01 * x1i) + (m02 * x2i + m03 * x3i)) + s0
-        yr[i + 1] += ((m01 * x0r + d1 * x1r) + (m12 * x2r + m13 * x3r)) + r1
-        yi[i + 1] += ((m01 * x0i + d1 * x1i) + (m12 * x2i + m13 * x3i)) + s1
-        yr[i + 2] += ((m02 * x0r + m12 * x1r) + (d2 * x2r + m23 * x3r)) + r2
-        yi[i + 2] += ((m02 * x0i + m12 * x1i) + (d2 * x2i + m23 * x3i)) + s2
-        yr[i + 3] += ((m03 * x0r + m13 * x1r) + (m23 * x2r + d3 * x3r)) + r3
-        yi[i + 3] += ((m03 * x0i + m13 * x1i) + (m23 * x2i + d3 * x3i)) + s3
-        o0 = o3 + k - i - 3
-        i += 4
-    while i < k:  # the last k mod 4 rows, one at a time
-        xri = xr[i]
-        xii = xi[i]
-        accr = P[o0] * xri
-        acci = P[o0] * xii
-        for t in range(1, k - i):
-            m = P[o0 + t]
-            yr[i + t] += m * xri
-            yi[i + t] += m * xii
-            accr += m * xr[i + t]
-            acci += m * xi[i + t]
-        yr[i] += accr
-        yi[i] += acci
-        o0 += k - i
-        i += 1
+    while i + 1 < k:
+        o1 = o0 + k - i  # row i + 1 of the triangle starts at o1 (its diagonal entry)
+        p0 = P[o0 + 2 : o0 + k - i]  # M[i, i + 2 : k]
+        p1 = P[o1 + 1 : o1 + k - i - 1]  # M[i + 1, i + 2 : k]
+        cr = yr[i + 2 : k]
+        ci = yi[i + 2 : k]
+        ur = xr[i + 2 : k]
+        ui = xi[i + 2 : k]
+        x0r, x1r = xr[i], xr[i + 1]
+        x0i, x1i = xi[i], xi[i + 1]
+        n = p0.shape[0]
+        for t in range(n):
+            cr[t] += p0[t] * x0r + p1[t] * x1r
+            ci[t] += p0[t] * x0i + p1[t] * x1i
+        r0 = s0 = r1 = s1 = 0.0  # even t
+        q0 = v0 = q1 = v1 = 0.0  # odd t
+        for c in range(n // 2):
+            t = 2 * c
+            r0 += p0[t] * ur[t]
+            s0 += p0[t] * ui[t]
+            r1 += p1[t] * ur[t]
+            s1 += p1[t] * ui[t]
+            q0 += p0[t + 1] * ur[t + 1]
+            v0 += p0[t + 1] * ui[t + 1]
+            q1 += p1[t + 1] * ur[t + 1]
+            v1 += p1[t + 1] * ui[t + 1]
+        if n % 2:
+            t = n - 1
+            r0 += p0[t] * ur[t]
+            s0 += p0[t] * ui[t]
+            r1 += p1[t] * ur[t]
+            s1 += p1[t] * ui[t]
+        d0, m01, d1 = P[o0], P[o0 + 1], P[o1]
+        yr[i] += (d0 * x0r + m01 * x1r) + (r0 + q0)
+        yi[i] += (d0 * x0i + m01 * x1i) + (s0 + v0)
+        yr[i + 1] += (m01 * x0r + d1 * x1r) + (r1 + q1)
+        yi[i + 1] += (m01 * x0i + d1 * x1i) + (s1 + v1)
+        o0 = o1 + k - i - 1
+        i += 2
+    if i < k:  # the last row of an odd k: its diagonal entry
+        yr[i] += P[o0] * xr[i]
+        yi[i] += P[o0] * xi[i]
 
 
 #: Side of the square tiles in which :func:`dissipate` moves the matrix to and from its

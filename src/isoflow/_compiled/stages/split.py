@@ -8,7 +8,8 @@ BLAS layout its specializations: :mod:`isoflow._compiled.dense_tiles` with
 :func:`finish_planar`). A half step is
 
 * the exact flow of the linear part, :func:`apply_flow`, dispatched on the class of its record:
-  :class:`ModalFlow` (a basis you give, any layout whose unit is one member) here, the
+  :class:`ModalFlow` (a basis you give, any layout whose unit is one member) and
+  :class:`UniformFlow` (one rate on every mode: a scaling) here, the
   sphere's per-diagonal flow (:class:`isoflow.sphere.compiled.SphereFlow`) registered by
   :mod:`isoflow.sphere.compiled` with :func:`provide_flow`;
 * the forcing, patterns stored sparse (CSR: a band of spherical harmonics touches two
@@ -37,6 +38,7 @@ __all__ = [
     "ModalFlow",
     "NoFlow",
     "SplitParams",
+    "UniformFlow",
     "apply_flow",
     "begin",
     "finish",
@@ -53,6 +55,13 @@ class NoFlow(NamedTuple):
     """No linear part (a forcing alone)."""
 
     none: int
+
+
+class UniformFlow(NamedTuple):
+    """:math:`W \\mathrel{*}= e^{-c\\tau}`: a linear part with one rate ``c`` on every mode
+    (a linear drag alone, or no dissipation with a forcing); ``decay[j_tau] = e^{-c tau}``."""
+
+    decay: Array
 
 
 class ModalFlow(NamedTuple):
@@ -120,6 +129,15 @@ def _apply_flow_typer(flow, W, j):  # type: ignore[no-untyped-def]  # numba: no 
 @numba.njit(cache=True)
 def _no_flow(flow, W, j):  # type: ignore[no-untyped-def]
     pass
+
+
+@provide_flow(UniformFlow)
+@numba.njit(cache=True)
+def _uniform_flow(flow, W, j):  # type: ignore[no-untyped-def]
+    d = flow.decay[j]
+    if d != 1.0:
+        for i in range(W.shape[0]):
+            W[i] = complex(d * W[i].real, d * W[i].imag)
 
 
 @provide_flow(ModalFlow)
