@@ -99,3 +99,26 @@ def test_throw_raises_with_the_exception_as_cause(path: str) -> None:
     assert "\n" not in str(err.value)
     assert isinstance(err.value.__cause__, ValueError)
     assert str(err.value.__cause__) == "entry too large"
+
+
+def test_a_field_declared_not_to_raise_ends_the_run_with_its_exception() -> None:
+    """``CompiledB(..., raises=False)`` skips the per-call copy that lets a raising member be
+    redone alone: a raise then ends the run with the field's own exception (serial driver);
+    before it raises, the run equals the default one bit for bit."""
+    limit, _ = _limit_and_step(True)
+    Y = _members()
+    kernel = iso.CompiledB(user_kernels.raises_when_large, (C, float(limit)), raises=False)
+    prob = iso.IsospectralProblem(algebra=ALG, kernel=kernel)
+    with pytest.raises(ValueError, match="entry too large"):
+        iso.solve(prob, iso.IsoMP(), Y, dt=DT, n_steps=N_STEPS, progress=False,
+                  threads={"blas": 1, "numba": 1})  # fmt: skip
+    short = N_STEPS // 4  # far before the raise
+    a = iso.solve(prob, iso.IsoMP(), Y, dt=DT, n_steps=short, progress=False)
+    b = iso.solve(_problem(limit, True), iso.IsoMP(), Y, dt=DT, n_steps=short, progress=False)
+    assert a.ys.tobytes() == b.ys.tobytes()
+
+
+@pytest.mark.parametrize("value", [0, "no", None])
+def test_compiled_b_raises_must_be_a_bool(value: Any) -> None:
+    with pytest.raises(TypeError, match="raises must be True or False"):
+        iso.CompiledB(user_kernels.raises_when_large, (C, 1.0), raises=value)

@@ -31,6 +31,12 @@ output (``iterate``) and the new state (``finish``). Everything else exists here
 
 Units are independent, so each runs all its steps on its own (unit-outer loops); the drivers
 run the units in sequence (:func:`drive_serial`) or over numba threads (:func:`drive_parallel`).
+The state-sized buffers of a unit's steps (the stage, its guess and new state, the stage's
+scratch rows, the state and compensations a failed step returns to) are the caller's: one set
+per thread (``sv``, ``sw``, ``se``, indexed by the numba thread's id), kept by the runner from
+call to call. Allocated afresh in every call, they cost a page fault per 4 KiB touched (at
+``N = 1024`` about 150 MB a call, 60-100 ms on this machine's VM, while a solve at that size
+calls the loop for every step or two).
 The per-step arithmetic of a member does not depend on how many steps a call takes, so a run
 split into calls anywhere gives the same states bit for bit.
 
@@ -158,11 +164,13 @@ def _close_step(alive, ok, its, it_tot, it_max, restore, fail_code, fail_res, re
 @numba.njit(cache=True, nogil=True)
 def run_unit(  # type: ignore[no-untyped-def]
     begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
-    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, m0,
+    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, sv, sw, se, m0, tid,
 ):  # fmt: skip
     """Advance one unit (flat state ``W``, its ``ring`` ``(P, K, S)``, ``head``/``nh``
     ``(P,)`` and compensation ``comp`` ``(P, S)`` or ``(P, 0)``) by ``plan.nsteps`` steps; its
-    lanes are the members ``m0, m0 + 1, ...`` (those below ``rec.shape[0]``). See the module
+    lanes are the members ``m0, m0 + 1, ...`` (those below ``rec.shape[0]``). Its buffers are
+    thread ``tid``'s: ``sv[tid]`` ``(5, S)``, ``sw[tid]`` ``(max(nwork, 1), S)``, ``se[tid]``
+    ``(P, S)`` or ``(P, 0)`` (their contents on entry do not matter). See the module
     docstring."""
     S = W.shape[0]
     P = gammas.shape[0]
@@ -192,15 +200,16 @@ def run_unit(  # type: ignore[no-untyped-def]
         for q in range(nv):
             rec[m0 + q, REC_CALL_DONE] = 1.0
         return
-    X = np.empty(S, dtype=dt)
-    G = np.empty(S, dtype=dt)
-    aux = np.empty(S, dtype=dt)
-    Wn = np.empty(S, dtype=dt)
-    work = np.empty((max(nwork, 1), S), dtype=dt)
+    vec = sv[tid]
+    X = vec[0]
+    G = vec[1]
+    aux = vec[2]
+    Wn = vec[3]
+    work = sw[tid]
     # A step that changes the state before its solve (earlier substeps, a split step's first
     # half) keeps the state it started from, to freeze a failed lane there.
     keep_start = P > 1 or plan.begin
-    Wstart = np.empty(S if keep_start else 1, dtype=dt)
+    Wstart = vec[4]
     # One lane and one substep: the new state is written to the second buffer and the two swap
     # (no copy a step); a failed step leaves the state buffer untouched.
     swap = L == 1 and not keep_start
@@ -210,7 +219,7 @@ def run_unit(  # type: ignore[no-untyped-def]
     # The compensations at the start of a step: a failed lane's are restored. Without lanes to
     # restore one by one (``swap``), a failed step resets its compensation to zero instead of
     # copying it every step: a frozen member never steps again, and zero is a valid one.
-    Estart = np.empty(comp.shape if compensated and not swap else (P, 0), dtype=comp.dtype)
+    Estart = se[tid]  # (P, S) when compensated, else (P, 0); read only when not ``swap``
     D = data.shape[2]
     sd = np.empty((L, D))
     mm = max(mem, 1)
@@ -347,25 +356,29 @@ def run_unit(  # type: ignore[no-untyped-def]
 # share a cache entry and one variant could load the other.
 def drive_serial(  # type: ignore[no-untyped-def]
     begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
-    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec,
+    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, sv, sw, se,
 ):  # fmt: skip
-    """:func:`run_unit` for every unit ``u`` of ``W`` (``(U, S)``), one after another."""
+    """:func:`run_unit` for every unit ``u`` of ``W`` (``(U, S)``), one after another, on the
+    buffers of thread 0."""
     L = blocks.lanes(lay)
     for u in range(W.shape[0]):
         run_unit(
             begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
-            nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
+            nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, sv, sw, se, u * L, 0,
         )  # fmt: skip
 
 
 def drive_parallel(  # type: ignore[no-untyped-def]
     begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
-    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec,
+    W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, sv, sw, se,
 ):  # fmt: skip
-    """:func:`run_unit` for every unit of ``W``, units over numba threads."""
+    """:func:`run_unit` for every unit of ``W``, units over numba threads, each on its
+    thread's buffers (``numba.get_thread_id()`` is below the threads of the region, which
+    the buffers' first axis covers)."""
     L = blocks.lanes(lay)
     for u in numba.prange(W.shape[0]):
         run_unit(
             begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
-            nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, u * L,
+            nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, sv, sw, se, u * L,
+            numba.get_thread_id(),
         )  # fmt: skip

@@ -189,6 +189,7 @@ class CompiledRunner(Runner):
         self.mix = anderson if self.solver.anderson > 0 else no_mixing
         self.parallel = self.U >= 2 and _threads() > 1 and self._threads_allowed()
         self._drive: Any = None
+        self._buffers: tuple[Array, Array, Array] | None = None
 
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS (the BLAS
@@ -409,8 +410,27 @@ class CompiledRunner(Runner):
             self.layout.record, self.mp, self.impl.nwork, self.W[units], self.ring[units],
             self.head[units], self.nh[units], self.comp[units], self.coefs, self.gammas, plan,
             data, rows,
-            self.solver, self.rec[members],
+            self.solver, self.rec[members], *self._thread_buffers(),
         )  # fmt: skip
+
+    def _thread_buffers(self) -> tuple[Array, Array, Array]:
+        """The driver's state-sized buffers, one set per numba thread of a parallel call
+        (:mod:`isoflow._compiled.driver`): ``(T, 5, S)``, ``(T, max(nwork, 1), S)`` and the
+        compensations ``(T, P, S)`` (``S = 0`` without compensation). Kept from call to call
+        (fresh memory costs a page fault per 4 KiB touched); grown when a call may run on more
+        threads than the buffers cover."""
+        import numba
+
+        T = max(int(numba.get_num_threads()), 1) if self.parallel else 1
+        if self._buffers is None or self._buffers[0].shape[0] < T:
+            S, dt = self.S, self.W.dtype
+            P = self.gammas.shape[0]
+            self._buffers = (
+                np.empty((T, 5, S), dtype=dt),
+                np.empty((T, max(self.impl.nwork, 1), S), dtype=dt),
+                np.empty((T, P, self.comp.shape[2]), dtype=dt),
+            )
+        return self._buffers
 
     def _step_data(self, k0: int, nsteps: int, members: slice) -> Array:
         """The stage's step data of the steps ``k0 + 1 ..`` for the units' ``members`` (their
@@ -461,7 +481,7 @@ class CompiledRunner(Runner):
         """Whether the field is the user's (:class:`~isoflow.CompiledB`), which may raise: a
         chunk then keeps a copy of the arrays it changes, to redo the members after a raise.
         (Such a run has one member per unit: only built-in kernels run as lanes.)"""
-        return isinstance(self.kernel, CompiledB) and self.layout.lanes == 1
+        return isinstance(self.kernel, CompiledB) and self.kernel.raises and self.layout.lanes == 1
 
     @property
     def _changed(self) -> tuple[Array, ...]:

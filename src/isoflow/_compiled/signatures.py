@@ -122,7 +122,7 @@ class OneUnit:
         if d is None:
             head, per_unit, tail = _split(signature.args)
             one = tuple(a.copy(ndim=a.ndim - 1) for a in per_unit)
-            sig = types.none(*head, *one, *tail, types.int64)
+            sig = types.none(*head, *one, *tail, types.int64, types.int64)
             d = _UNIT_LOOPS[signature] = numba.njit(sig, cache=True, nogil=True)(
                 driver.run_unit.py_func
             )
@@ -130,13 +130,14 @@ class OneUnit:
 
     def __call__(self, *args: Any) -> None:
         head, per_unit, tail = _split(args)
-        self.unit(*head, *(a[0] for a in per_unit), *tail, 0)
+        self.unit(*head, *(a[0] for a in per_unit), *tail, 0, 0)  # member 0, thread 0
 
 
 def _split(args: tuple[Any, ...]) -> tuple[tuple[Any, ...], tuple[Any, ...], tuple[Any, ...]]:
     """A driver's arguments (or their types) as ``(head, per_unit, tail)``: ``per_unit`` the
     arrays with a unit axis (``W, ring, head, nh, comp``), between the functions, the layout
-    and the scratch count before them and the shared arrays and records after them."""
+    and the scratch count before them and the shared arrays, records and per-thread buffers
+    after them."""
     return args[:9], args[9:14], args[14:]
 
 

@@ -320,11 +320,14 @@ def euler_sphere(
     if alpha:
         kernel = CompiledB(
             euler_double_bracket_field, (coef.inv_piv, coef.mult, 1.0 / h, shift, h, alpha),
-            name="euler_sphere_double_bracket_field",
+            name="euler_sphere_double_bracket_field", raises=False,
         )  # fmt: skip
     else:
         kernel = CompiledB(
-            euler_field, (coef.inv_piv, coef.mult, 1.0 / h, shift), name="euler_sphere_field"
+            euler_field,
+            (coef.inv_piv, coef.mult, 1.0 / h, shift),
+            name="euler_sphere_field",
+            raises=False,
         )
     split = sphere_split(
         N, viscosity=viscosity, hyperviscosity=hyperviscosity, drag=drag, forcing=forcing,

@@ -193,7 +193,7 @@ def mhd_sphere(
 
     kernel = CompiledB(
         mhd_field, (coef.inv_piv, coef.mult, coef.diag, coef.gamma, 1.0 / hbar(N), shift),
-        name="mhd_sphere_field",
+        name="mhd_sphere_field", raises=False,
     )  # fmt: skip
 
     def hamiltonian(Y: Array) -> Array:

@@ -272,7 +272,9 @@ def qg_sphere(
     planetary = np.ascontiguousarray(np.diag(F))
     from ..sphere.compiled import qg_field
 
-    kernel = CompiledB(qg_field, (op.inv_piv, op.mult, 1.0 / h, planetary), name="qg_field")
+    kernel = CompiledB(
+        qg_field, (op.inv_piv, op.mult, 1.0 / h, planetary), name="qg_field", raises=False
+    )
 
     def energy_weight(E: Array) -> Array:
         r"""The QG energy of each unit harmonic ``E``: :math:`-\frac{4\pi}{N}\operatorname{Re}
