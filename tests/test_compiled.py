@@ -578,3 +578,57 @@ def test_compiled_compositions_equal_numpy(name: str) -> None:
     again = compiled_runner(prob, method, a.y, h, method_state=a.state, k=n)
     rest = run_with(again, 2 * n, save_every, chunks=(n,))
     assert np.array_equal(rest.y, longer.y)
+
+
+def _steps_in_calls(
+    problem: iso.IsospectralProblem,
+    method: iso.IsoMP,
+    y: np.ndarray,
+    calls: tuple[int, ...],
+    numba_threads: int,
+) -> np.ndarray:
+    """The state after the steps of ``calls`` (one compiled call each) from ``y``."""
+    from isoflow._save_grid import SaveGrid
+    from isoflow.threads import ThreadPools, plan_threads
+
+    runner = compiled_runner(problem, method, y, 0.05)
+    assert runner is not None
+    pools = ThreadPools()
+    try:
+        pools.apply(plan_threads({"blas": 1, "numba": numba_threads}, parallel=runner.parallel))
+        for n in calls:
+            out = np.empty((1, runner.M, *runner.core), dtype=problem.algebra.dtype)
+            runner.advance(n, SaveGrid(2**62, runner.k + n), out)
+    finally:
+        pools.restore()
+    return runner.state()[0]
+
+
+@pytest.mark.parametrize("numba_threads", [1, 2])
+@pytest.mark.parametrize("compensated", [True, False])
+def test_kept_buffers_give_the_states_of_fresh_ones(
+    monkeypatch: pytest.MonkeyPatch, numba_threads: int, compensated: bool
+) -> None:
+    """The driver's state-sized buffers, kept by the runner per thread from call to call for
+    large units (:data:`isoflow._compiled.runner.KEEP_BUFFERS_BYTES`) and fresh in every call
+    for small ones, give the same states bit for bit, whatever the calls' lengths: an
+    ensemble (members as lanes, units over numba threads), one dense system, and a split step
+    (whose failed steps return to the buffered start)."""
+    from isoflow._compiled import runner as runner_module
+
+    if numba_threads > iso.threads.available_cores():
+        pytest.skip("needs 2 cores")
+    Y = iso.algebras.so(6).random(seed=4, batch=(40,), scale=0.3)
+    rigid, _ = iso.models.rigid_body(6)
+    sphere, S0 = iso.models.euler_sphere(N=12, seed=2)
+    split, _ = iso.models.euler_sphere(N=12, seed=2, viscosity=0.01, drag=0.1)
+    runs = [(rigid, iso.IsoMP(compensated=compensated), Y),
+            (sphere, iso.IsoMP(compensated=compensated), S0),
+            (split, iso.Strang(iso.IsoMP(compensated=compensated)), S0)]  # fmt: skip
+    for problem, method, y in runs:
+        fresh = _steps_in_calls(problem, method, y, (12,), numba_threads)
+        monkeypatch.setattr(runner_module, "KEEP_BUFFERS_BYTES", 0)
+        kept_one = _steps_in_calls(problem, method, y, (12,), numba_threads)
+        kept_many = _steps_in_calls(problem, method, y, (1, 5, 2, 4), numba_threads)
+        monkeypatch.undo()
+        assert fresh.tobytes() == kept_one.tobytes() == kept_many.tobytes()

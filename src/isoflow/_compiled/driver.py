@@ -200,16 +200,24 @@ def run_unit(  # type: ignore[no-untyped-def]
         for q in range(nv):
             rec[m0 + q, REC_CALL_DONE] = 1.0
         return
-    vec = sv[tid]
-    X = vec[0]
-    G = vec[1]
-    aux = vec[2]
-    Wn = vec[3]
-    work = sw[tid]
     # A step that changes the state before its solve (earlier substeps, a split step's first
     # half) keeps the state it started from, to freeze a failed lane there.
     keep_start = P > 1 or plan.begin
-    Wstart = vec[4]
+    if sv.shape[2] == S:  # the runner's buffers (large units)
+        vec = sv[tid]
+        X = vec[0]
+        G = vec[1]
+        aux = vec[2]
+        Wn = vec[3]
+        Wstart = vec[4]
+        work = sw[tid]
+    else:  # small units: fresh buffers, as fast as the cache keeps them
+        X = np.empty(S, dtype=dt)
+        G = np.empty(S, dtype=dt)
+        aux = np.empty(S, dtype=dt)
+        Wn = np.empty(S, dtype=dt)
+        Wstart = np.empty(S if keep_start else 1, dtype=dt)
+        work = np.empty((max(nwork, 1), S), dtype=dt)
     # One lane and one substep: the new state is written to the second buffer and the two swap
     # (no copy a step); a failed step leaves the state buffer untouched.
     swap = L == 1 and not keep_start
@@ -219,7 +227,10 @@ def run_unit(  # type: ignore[no-untyped-def]
     # The compensations at the start of a step: a failed lane's are restored. Without lanes to
     # restore one by one (``swap``), a failed step resets its compensation to zero instead of
     # copying it every step: a frozen member never steps again, and zero is a valid one.
-    Estart = se[tid]  # (P, S) when compensated, else (P, 0); read only when not ``swap``
+    if se.shape[2] == comp.shape[1]:
+        Estart = se[tid]  # (P, S) when compensated, else (P, 0); read only when not ``swap``
+    else:
+        Estart = np.empty(comp.shape if compensated and not swap else (P, 0), dtype=comp.dtype)
     D = data.shape[2]
     sd = np.empty((L, D))
     mm = max(mem, 1)
