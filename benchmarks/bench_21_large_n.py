@@ -23,6 +23,20 @@ against an older commit, and the thread scaling of one iteration.
 Run alone: ``python benchmarks/bench_21_large_n.py``. Without git or the baseline commit,
 part 1 is reported as not measured.
 
+Measured on the idle machine, 2026-11-27 02:17-02:21 UTC (``python benchmarks/run_all.py
+--only 21``), after the compiled loop stopped allocating its state-sized buffers in every
+call (a solve at N = 1024 calls it every step or two, and 150 MB of fresh buffers cost 60-100
+ms of page faults a call) and the sphere's field stopped the per-call copy kept for fields
+that raise: **0.58 at N = 512 and 0.58 at N = 1024** (3.10 and 2.42 iterations a step against
+4.28 and 3.32; the same energy error, 6.2e-6 and 3.1e-6, and Casimir drift, 1.1e-15 and
+1.5e-15, as the old code); part 2 1.57x and 1.69x a step's iteration (the iteration alone
+1.64x and 1.77x). What stands between 0.58 and 0.5 is the start of the run: the first steps
+have too few stage offsets to extrapolate (at N = 1024 the first five take 11, 7, 6, 4 and 3
+iterations, then 2 a step to the end; at N = 512 11, 8, 6, 5, 4, 3, 3, then 2-3), 21 of the
+121 iterations at N = 1024. With those at the steady two, the ratio would be about 0.49;
+Anderson mixing in these steps saved three iterations of the first one only (memory 1-3,
+N = 512), and a run of 10^5 steps does not see them.
+
 Measured on the idle machine, 2026-11-26 (evening), one run each: before the stage offsets
 were taken from ``G(X)`` and the default degree of the start depended on the state
 (``0913063``), 0.69 at N = 512 (3.38 against 4.28 iterations a step) and 0.85 at N = 1024
