@@ -34,9 +34,10 @@ run the units in sequence (:func:`drive_serial`) or over numba threads (:func:`d
 The state-sized buffers of a unit's steps (the stage, its guess and new state, the stage's
 scratch rows, the state and compensations a failed step returns to) are the caller's: one set
 per thread (``sv``, ``sw``, ``se``, indexed by the numba thread's id), kept by the runner from
-call to call. Allocated afresh in every call, they cost a page fault per 4 KiB touched (at
-``N = 1024`` about 150 MB a call, 60-100 ms on this machine's VM, while a solve at that size
-calls the loop for every step or two).
+call to call for large units. Allocated afresh in every call, they cost a page fault per 4 KiB
+touched (at ``N = 1024`` about 150 MB a call, 60-100 ms on this machine's VM, while a solve at
+that size calls the loop for every step or two); a small unit's (the runner passes buffers of
+length 0) are allocated here, which measured faster.
 The per-step arithmetic of a member does not depend on how many steps a call takes, so a run
 split into calls anywhere gives the same states bit for bit.
 

@@ -424,7 +424,8 @@ class CompiledRunner(Runner):
         (:mod:`isoflow._compiled.driver`): ``(T, 5, S)``, ``(T, max(nwork, 1), S)`` and the
         compensations ``(T, P, S)`` (``S = 0`` without compensation). Kept from call to call
         (fresh memory costs a page fault per 4 KiB touched); grown when a call may run on more
-        threads than the buffers cover."""
+        threads than the buffers cover. Units below :data:`KEEP_BUFFERS_BYTES` get buffers
+        with ``S = 0``: the driver then allocates its own in every call."""
         import numba
 
         T = max(int(numba.get_num_threads()), 1) if self.parallel else 1

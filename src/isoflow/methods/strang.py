@@ -126,10 +126,12 @@ class Strang(Method):
         """:func:`~isoflow.splitting.split_terms` of ``problem``, kept for the last problem:
         checking the patterns against the space costs passes over ``N^2`` numbers, which
         every chunk of a run and every NumPy step would otherwise repeat."""
-        if self._terms_cache and self._terms_cache[0][0] is problem:
-            return self._terms_cache[0][1]
+        cache = self._terms_cache
+        hit = cache[0] if cache else None  # one read: another thread may replace the entry
+        if hit is not None and hit[0] is problem:
+            return hit[1]
         terms = split_terms(problem)
-        self._terms_cache[:] = [(problem, terms)]
+        cache[:] = [(problem, terms)]
         return terms
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
