@@ -147,9 +147,8 @@ class CompiledB(Kernel):
         at their last good state while the others go on. ``raises=False`` skips that copy (for
         Euler on the sphere at ``N = 1024``, about 100 MB a call: the state, its ring of stage
         offsets and its compensation); an ``f`` that raises anyway then ends the run with its
-        exception. The built-in sphere models' fields (Euler, the
-        quasi-geostrophic model, MHD), which contain no raise and divide by no variable, pass
-        ``False``.
+        exception. The built-in sphere models' fields (Euler, the quasi-geostrophic model,
+        MHD), which contain no raise and divide by no variable, pass ``False``.
 
     Examples
     --------
