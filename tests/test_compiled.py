@@ -588,20 +588,13 @@ def _steps_in_calls(
     numba_threads: int,
 ) -> np.ndarray:
     """The state after the steps of ``calls`` (one compiled call each) from ``y``."""
-    from isoflow._save_grid import SaveGrid
-    from isoflow.threads import ThreadPools, plan_threads
+    from isoflow._time_loop import run_threads
 
-    runner = compiled_runner(problem, method, y, 0.05)
-    assert runner is not None
-    pools = ThreadPools()
-    try:
-        pools.apply(plan_threads({"blas": 1, "numba": numba_threads}, parallel=runner.parallel))
-        for n in calls:
-            out = np.empty((1, runner.M, *runner.core), dtype=problem.algebra.dtype)
-            runner.advance(n, SaveGrid(2**62, runner.k + n), out)
-    finally:
-        pools.restore()
-    return runner.state()[0]
+    with run_threads({"blas": 1, "numba": numba_threads}):
+        runner = compiled_runner(problem, method, y, 0.05)
+        assert runner is not None
+        n = sum(calls)
+        return run_with(runner, n, save_every=n, chunks=calls).y
 
 
 @pytest.mark.parametrize("numba_threads", [1, 2])
