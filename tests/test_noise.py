@@ -152,6 +152,12 @@ def test_bad_noise_on_a_problem_is_a_typed_one_line_error() -> None:
     noisy, _ = _rigid()
     with pytest.raises(ParameterError, match="IsoMP would ignore"):
         iso.solve(noisy, iso.IsoMP(), W0, dt=0.1, n_steps=1)
+    viscous, w0 = iso.models.euler_sphere(N=6, seed=1, noise=0.05, noise_seed=1, viscosity=0.01)
+    with pytest.raises(  # the split step of IsoMP would drop the noise as IsoMP does
+        ParameterError,
+        match=r"Strang\(IsoMP\) would ignore: integrate it with iso.Strang\(iso.StochasticIsoMP",
+    ):
+        iso.solve(viscous, iso.Strang(), w0, dt=0.1, n_steps=1)
     with pytest.raises(ParameterError, match="symmetric"):
         iso.Composition(iso.StochasticIsoMP(), "suzuki-4")
     ids = dataclasses.replace(noisy, noise=noisy.noise.with_members([4, 5]))
@@ -211,6 +217,37 @@ def test_zero_noise_is_isomp_from_the_state_bit_for_bit() -> None:
     c = iso.solve(prob, iso.StochasticIsoMP(), Y0, **kw)
     assert "compiled" in a.stats.runner
     assert a.ys.tobytes() == b.ys.tobytes() == c.ys.tobytes()
+
+
+def test_the_split_step_of_stochastic_isomp_draws_each_steps_own_increments() -> None:
+    """``Strang(StochasticIsoMP())`` is the half flows of the linear part around the
+    stochastic step with the increments of that step and member (written out here from the
+    method's documented pieces), and without a linear part the stochastic step itself bit for
+    bit; drawing one step's increments at every step fails both."""
+    prob, w0 = iso.models.euler_sphere(N=8, seed=1, noise=0.1, noise_seed=4, viscosity=0.02)
+    Y0 = np.stack([w0, prob.algebra.project(1.1 * w0)])
+    h, n = 0.05, 6
+    split = iso.Strang(iso.StochasticIsoMP())
+    sol = iso.solve(prob, split, Y0, dt=h, n_steps=n, progress=False)
+    sto, lin = iso.StochasticIsoMP(), prob.linear_part
+    for j in range(2):
+        y = Y0[j]
+        for k in range(n):
+            dbeta = sto.step_data(prob, StepDataRequest(k, 1, np.array([j]), h))[0, 0]
+            y = lin.flow(sto.step(prob, lin.flow(y, h / 2), h, data=dbeta).y, h / 2)
+        assert np.max(np.abs(y - sol.ys[-1, j])) < 1e-13
+    # no linear part, a noise field of the state (the NumPy path): the stochastic step exactly
+    rigid, W0 = iso.models.rigid_body(4)
+    fields = 0.3 * np.stack([rigid.algebra.random(i) for i in range(2)])
+    noisy = dataclasses.replace(
+        rigid, noise=TransportNoise(lambda W: np.broadcast_to(fields, (*W.shape[:-2], 2, 4, 4))
+                                    * (1.0 + 0.1 * W[..., :1, 1:2, None]), seed=5, count=2)
+    )  # fmt: skip
+    a = iso.solve(noisy, iso.StochasticIsoMP(), W0, dt=0.05, n_steps=8, progress=False)
+    b = iso.solve(noisy, split, W0, dt=0.05, n_steps=8, progress=False)
+    assert a.stats.runner == b.stats.runner == "NumPy"
+    assert a.ys.tobytes() == b.ys.tobytes()
+    assert not np.array_equal(a.ys[1] - a.ys[0], a.ys[2] - a.ys[1])
 
 
 def test_compiled_and_numpy_paths_take_the_same_noisy_steps_and_keep_the_casimirs() -> None:

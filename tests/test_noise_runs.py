@@ -82,3 +82,28 @@ def test_noise_mistakes_on_the_command_line_are_one_line_errors(
     assert res.returncode == 1
     assert re.search(message, one_error_line(res.stderr)), res.stderr
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_noise_with_dissipation_runs_as_the_split_step_of_stochastic_isomp(tmp_path: Path) -> None:
+    """The default method's split step would drop the noise: a one-line error; with
+    ``--method stochastic-isomp`` the run is ``Strang(StochasticIsoMP())`` and its states
+    leave the path without noise."""
+    common = ["run", "euler-sphere", "--N", "6", "--viscosity", "0.01", "--dt", "0.05",
+              "--n-steps", "4", "--quiet"]  # fmt: skip
+    noisy = ["--noise", "0.1", "--noise-seed", "2"]
+    res = run_cli_here(*common, *noisy, "--out", "x.h5", cwd=tmp_path)
+    assert res.returncode == 1
+    assert re.search(
+        r"transport noise, which Strang\(IsoMP\) would ignore: integrate it with "
+        r"iso.Strang\(iso.StochasticIsoMP\(\)\)",
+        one_error_line(res.stderr),
+    ), res.stderr
+    assert not (tmp_path / "x.h5").exists()
+    res = run_cli_here(*common, *noisy, "--method", "stochastic-isomp", "--out", "s.h5",
+                       cwd=tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    res = run_cli_here(*common, "--out", "d.h5", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    s, d = io.load(tmp_path / "s.h5"), io.load(tmp_path / "d.h5")
+    assert io.info(tmp_path / "s.h5")["meta"]["method"] == "Strang(stochastic IsoMP)"
+    assert np.max(np.abs(s.ys[-1] - d.ys[-1])) > 1e-4

@@ -66,6 +66,7 @@ class StochasticHeun(Method):
     symmetric: ClassVar[bool] = False
     name: ClassVar[str] = "stochastic Heun"
     reads_step_data: ClassVar[bool] = True
+    integrates_noise: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "truncation", check_truncation(self.truncation))

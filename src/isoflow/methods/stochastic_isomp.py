@@ -43,6 +43,7 @@ from ..algebras import Algebra
 from ..noise import TRANSPORT_STREAM, TransportNoise, brownian_increments, check_truncation
 from ..nonlinear import FixedPoint, NonlinearSolver
 from ..problems import IsospectralProblem
+from ..splitting import has_split_part
 from ._base import Method, StepDataRequest, StepResult, check_implicit_options
 from .isomp import IsoMP
 
@@ -95,6 +96,7 @@ class StochasticIsoMP(Method):
     symmetric: ClassVar[bool] = False
     name: ClassVar[str] = "stochastic IsoMP"
     reads_step_data: ClassVar[bool] = True
+    integrates_noise: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         check_implicit_options(self.solver, "state")
@@ -201,14 +203,20 @@ def _without_jvp(problem: IsospectralProblem, noise: TransportNoise) -> Isospect
 
 
 def refuse_noise(problem: IsospectralProblem, method: Method) -> None:
-    """Raise if a method that reads no increments is given a problem with noise.
+    """Raise if a method that does not integrate transport noise is given a problem with
+    noise (a split step integrates it when its base does).
 
     Raises
     ------
     ParameterError
     """
-    if problem.noise is not None and not method.reads_step_data:
+    if problem.noise is not None and not method.integrates_noise:
+        how = (
+            "iso.Strang(iso.StochasticIsoMP())"
+            if has_split_part(problem)
+            else "iso.StochasticIsoMP()"
+        )
         raise ParameterError(
             f"the problem has transport noise, which {method.name} would ignore: integrate it "
-            "with iso.StochasticIsoMP() (method 'stochastic-isomp')"
+            f"with {how} (method 'stochastic-isomp')"
         )

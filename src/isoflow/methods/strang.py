@@ -105,6 +105,12 @@ class Strang(Method):
         return f"Strang({self.base.name})"
 
     @property
+    def integrates_noise(self) -> bool:  # type: ignore[override]
+        """Whether the base integrates transport noise (its increments are the split step's
+        last step data columns)."""
+        return bool(self.base.integrates_noise)
+
+    @property
     def solver(self) -> Any:
         """The base method's nonlinear solver (``None`` for an explicit base)."""
         return getattr(self.base, "solver", None)
@@ -135,9 +141,11 @@ class Strang(Method):
         return terms
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
-        """``(nsteps, members, 2 (R_d + R_s))``: per half step the time-dependent amplitudes
-        at its midpoint, then the standard normals of its noise modes (first half, second
-        half; :func:`isoflow.splitting.data_widths`)."""
+        """``(nsteps, members, 2 (R_d + R_s) + D)``: per half step the time-dependent
+        amplitudes at its midpoint, then the standard normals of its noise modes (first half,
+        second half; :func:`isoflow.splitting.data_widths`), then the ``D`` columns of the
+        base's own step data when it reads some (the transport noise's increments of
+        :class:`~isoflow.StochasticIsoMP`, drawn as the base alone draws them)."""
         det, sto = self._terms(problem)
         rd, rs = data_widths(problem, (det, sto))
         members = np.asarray(request.members, dtype=np.int64).reshape(-1)
@@ -161,6 +169,9 @@ class Strang(Method):
                 out[:, :, rd + col : rd + col + r] = xi[:, :, :r]
                 out[:, :, 2 * rd + rs + col : 2 * rd + rs + col + r] = xi[:, :, r:]
                 col += r
+        if self.base.reads_step_data:
+            base = np.asarray(self.base.step_data(problem, request), dtype=np.float64)
+            out = np.concatenate([out, base.reshape(n, members.size, -1)], axis=-1)
         return out
 
     def _half_step(
@@ -189,21 +200,29 @@ class Strang(Method):
         state: Any = None,
         data: Array | None = None,
     ) -> StepResult:
-        if problem.linear_part is None and not problem.forcing:
-            return self.base.step(problem, y, h, state)
         rd, rs = data_widths(problem, self._terms(problem))
-        if rd + rs and data is None:
+        half = rd + rs
+        own: dict[str, Array] = {}
+        if self.base.reads_step_data:
+            if data is None:
+                raise ParameterError(
+                    f"{self.name}: the base reads step data (noise increments) of whole "
+                    "steps: step it through iso.solve or iso.step, not inside a composition"
+                )
+            own = {"data": data[..., 2 * half :]}
+        if problem.linear_part is None and not problem.forcing:
+            return self.base.step(problem, y, h, state, **own)
+        if half and data is None:
             raise ParameterError(
                 f"{self.name}: the forcing has time-dependent amplitudes or noise, which are "
                 "read per whole step (step data): step it through iso.solve, not inside a "
                 "composition"
             )
-        half = rd + rs
         first = None if data is None else data[..., :half]
-        second = None if data is None else data[..., half:]
+        second = None if data is None else data[..., half : 2 * half]
         tau = 0.5 * h
         y1 = self._half_step(problem, y, tau, first)
-        res = self.base.step(problem, y1, h, state)
+        res = self.base.step(problem, y1, h, state, **own)
         y2 = self._half_step(problem, res.y, tau, second)
         return StepResult(
             y=y2,
