@@ -91,6 +91,31 @@ def test_t1_not_a_whole_number_of_steps(so3_problem, W0) -> None:
         _solve(so3_problem, W0, dt=0.3, t1=1.0)
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"t1": 0.0, "n_steps": 4}, iso.TimeSpanError, r"empty \(t1 == t0 = 0.0\): 4 steps"),
+        ({"t1": 1.0, "dt": 1e-300}, iso.StepSizeError, "below the resolution .* near 1 are"),
+        ({"t1": 1.0, "n_steps": 10**20}, iso.StepSizeError, "dt = 1e-20 is below the resolution"),
+        ({"dt": 0.1, "n_steps": 10**30}, iso.StepSizeError, "below the resolution"),
+        ({"t0": 1e16, "dt": 1.0, "n_steps": 4}, iso.StepSizeError, r"near 1e\+16 are 2 apart"),
+        ({"t0": 1e308, "dt": 1e300, "n_steps": 10**9}, iso.StepSizeError, "not a finite time"),
+        ({"dt": 1.0, "n_steps": 10**14}, iso.ParameterError,
+         r"hold 10000000000000[12] saved states of shape \(3, 3\) in memory \(7.2e\+15 bytes\)"),
+    ],
+)  # fmt: skip
+def test_time_grids_a_run_cannot_hold_are_refused_before_it_starts(
+    so3_problem, W0, kwargs, error, match
+) -> None:
+    """An empty span, times that floats cannot tell apart (the saved times would repeat while
+    the states advance), a grid whose saved states do not fit in memory: a typed error, not a
+    run of steps of ``dt = 0``, wrong times or an allocation failure from NumPy."""
+    with pytest.raises(error, match=match):
+        iso.solve(so3_problem, iso.IsoMP(), W0, progress=False, **kwargs)
+    sol = iso.solve(so3_problem, iso.IsoMP(), W0, t0=1e15, dt=1.0, n_steps=4, progress=False)
+    assert np.array_equal(sol.ts, 1e15 + np.arange(5.0))  # 0.125 apart there: resolvable
+
+
 def test_time_arguments_must_be_two_of_three(so3_problem, W0) -> None:
     with pytest.raises(ValueError, match="exactly two of t1, dt and n_steps"):
         iso.solve(so3_problem, iso.IsoMP(), W0, dt=0.1, t1=1.0, n_steps=10)

@@ -97,7 +97,7 @@ def time_grid(
         )
     if t1 is None:
         assert dt is not None and n_steps is not None
-        return dt, n_steps
+        return _resolvable(t0, dt, n_steps)
     span = t1 - t0
     if dt is None:
         assert n_steps is not None
@@ -105,14 +105,43 @@ def time_grid(
             if span != 0:
                 raise StepSizeError("n_steps = 0 needs t1 == t0")
             return 1.0, 0
-        return span / n_steps, n_steps
+        if span == 0:
+            raise TimeSpanError(
+                f"the time span is empty (t1 == t0 = {t0}): {n_steps} steps would each be of "
+                "dt = 0; give a later t1, or n_steps = 0"
+            )
+        return _resolvable(t0, span / n_steps, n_steps)
     n = round(span / dt)
     if abs(n * dt - span) > 1e-9 * max(abs(span), abs(dt)):
         raise StepSizeError(
             f"t1 - t0 = {span!r} is not a whole number of steps dt = {dt!r} "
             f"({span / dt:.6g} steps); choose dt = {span / max(n, 1)!r} or pass n_steps"
         )
-    return dt, int(n)
+    return _resolvable(t0, dt, int(n))
+
+
+def _resolvable(t0: float, dt: float, n_steps: int) -> tuple[float, int]:
+    """``(dt, n_steps)`` if the times ``t0 + k dt`` of the run are distinct floats.
+
+    Raises
+    ------
+    StepSizeError
+        ``dt`` below the spacing of the floats near the run's times (the times of the saved
+        states would repeat or skip while the states advance), or a last time that overflows.
+    """
+    if n_steps == 0:
+        return dt, n_steps
+    end = t0 + n_steps * dt
+    if not math.isfinite(end):
+        raise StepSizeError(f"t0 + n_steps dt = {t0} + {n_steps} * {dt} is not a finite time")
+    spacing = float(np.spacing(max(abs(t0), abs(end))))
+    if dt < 4.0 * spacing:
+        raise StepSizeError(
+            f"dt = {dt!r} is below the resolution of the run's times (floats near "
+            f"{max(abs(t0), abs(end)):.6g} are {spacing:.3g} apart): the times of the states "
+            "would not be t0 + k dt; shift t0 towards 0 or take fewer, larger steps"
+        )
+    return dt, n_steps
 
 
 def _real(x: Any, what: str, error: type[Exception]) -> float:
@@ -195,6 +224,7 @@ def _check_state(
     problem.check_B(W)
     if problem.noise is not None:  # the members' ids (their noise keys) fit the ensemble
         problem.noise.member_ids(int(np.prod(problem.algebra.batch_shape(W), dtype=np.int64)))
+        problem.noise.check_fields_at(W, problem.algebra)
     return W
 
 

@@ -10,7 +10,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from ._errors import IsoflowError, ResultWriteError
+from ._errors import IsoflowError, ParameterError, ResultWriteError
 from ._failures import MemberFailures
 from .diagnostics import DiagnosticsAccumulator
 
@@ -69,8 +69,23 @@ class MemoryWriter:
     flush_seconds = math.inf
 
     def __init__(self, total: int, shape: tuple[int, ...], dtype: Any) -> None:
-        self._ts = np.empty(total)
-        self._ys = np.empty((total, *shape), dtype=dtype)
+        """Rows for ``total`` saved states of ``shape``.
+
+        Raises
+        ------
+        ParameterError
+            The rows do not fit in memory (the message says how many bytes they need).
+        """
+        try:
+            self._ts = np.empty(total)
+            self._ys = np.empty((total, *shape), dtype=dtype)
+        except (MemoryError, ValueError):
+            size = float(total) * math.prod(shape) * np.dtype(dtype).itemsize
+            raise ParameterError(
+                f"the solution would hold {total} saved states of shape {tuple(shape)} in "
+                f"memory ({size:.3g} bytes), more than can be allocated: save fewer "
+                "(a larger save_every) or stream them to a file (writer=iso.io.HDF5Writer(...))"
+            ) from None
         self._n = 0
 
     def rows(self, count: int) -> Array:
