@@ -98,8 +98,16 @@ def test_stopping_rule_parameters_are_checked() -> None:
         iso.FixedPoint(max_iter=0)
     with pytest.raises(ValueError, match="tolerances"):
         iso.FixedPoint(rtol=0.0, atol=0.0)
-    with pytest.raises(ValueError, match="jacobian"):
+    with pytest.raises(iso.ParameterError, match="jacobian must be 'dense' or 'krylov'"):
         iso.Newton(jacobian="banana")  # type: ignore[arg-type]
+    for bad in (-1, 0, 2.5, True):  # -1 ended in an UnboundLocalError inside the solve
+        with pytest.raises(iso.ParameterError, match="krylov_max_restarts must be an integer"):
+            iso.Newton(jacobian="krylov", krylov_max_restarts=bad)  # type: ignore[arg-type]
+    for bad in (-1.0, 0.0, 1.0, float("nan"), "1e-7"):
+        with pytest.raises(
+            iso.ParameterError, match=r"krylov_rtol must be a real number in \(0, 1\)"
+        ):
+            iso.Newton(jacobian="krylov", krylov_rtol=bad)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="initial_guess"):
         iso.IsoMP(initial_guess="zero")  # type: ignore[arg-type]
 

@@ -505,10 +505,20 @@ class Newton(NonlinearSolver):
 
     def __post_init__(self) -> None:
         if self.jacobian not in ("dense", "krylov"):
-            raise ValueError(f"jacobian must be 'dense' or 'krylov', got {self.jacobian!r}")
+            raise ParameterError(f"jacobian must be 'dense' or 'krylov', got {self.jacobian!r}")
         _StoppingRules(
             self.rtol, self.atol, self.max_iter, self.stall_rtol, self.divergence_factor
         ).check()
+        r = self.krylov_rtol
+        if (
+            isinstance(r, bool)
+            or not isinstance(r, (int, float, np.integer, np.floating))
+            or not 0 < r < 1
+        ):
+            raise ParameterError(f"krylov_rtol must be a real number in (0, 1), got {r!r}")
+        m = self.krylov_max_restarts
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
+            raise ParameterError(f"krylov_max_restarts must be an integer >= 1, got {m!r}")
 
     def _jvp(self, prob: FixedPointProblem, X: Array, GX: Array, dX: Array, mask: Array | None):
         if prob.jvp is not None:
