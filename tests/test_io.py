@@ -254,3 +254,20 @@ def test_version_1_files_read_and_resume_to_version_2(tmp_path: Path, monkeypatc
     done = io.info(path, verify_states=True)
     assert done["format_version"] == 2 and done["verified"] and done["state"] == "complete"
     assert io.load(path).ys.tobytes() == ref.ys.tobytes()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"chunk_rows": 2.5}, r"chunk_rows must be an integer >= 1, got 2.5"),
+        ({"chunk_rows": "x"}, r"chunk_rows must be an integer >= 1, got 'x'"),
+        ({"chunk_rows": 0}, r"chunk_rows must be an integer >= 1, got 0"),
+        ({"flush_seconds": -1}, r"flush_seconds must be a number of seconds >= 0, got -1"),
+        ({"flush_seconds": float("nan")}, r"flush_seconds must be a number of seconds >= 0"),
+        ({"config": {"a": np.zeros(2)}}, r"config must be JSON-ready .*ndarray"),
+    ],
+)
+def test_bad_writer_arguments_are_one_line_parameter_errors(tmp_path: Path, kwargs, match) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(iso.ParameterError, match=match):
+        io.HDF5Writer(tmp_path / "x.h5", **kwargs)
+    assert not (tmp_path / "x.h5").exists()

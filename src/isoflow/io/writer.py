@@ -29,7 +29,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .._errors import ResultFileError, ResultWriteError
+from .._errors import ParameterError, ResultFileError, ResultWriteError
 from .._failures import MemberFailures
 from .layout import Handles, create_layout, write_attrs
 from .lock import WriteLock
@@ -110,13 +110,30 @@ class HDF5Writer:
         flush_seconds: float = 1.0,
         force: bool = False,
     ) -> None:
-        if isinstance(chunk_rows, bool) or int(chunk_rows) < 1:
-            raise ValueError(f"chunk_rows must be >= 1, got {chunk_rows!r}")
+        if (
+            isinstance(chunk_rows, bool)
+            or not isinstance(chunk_rows, (int, np.integer))
+            or chunk_rows < 1
+        ):
+            raise ParameterError(f"chunk_rows must be an integer >= 1, got {chunk_rows!r}")
+        if (
+            isinstance(flush_seconds, bool)
+            or not isinstance(flush_seconds, (int, float, np.integer, np.floating))
+            or not flush_seconds >= 0  # NaN fails too; inf flushes only at checkpoints
+        ):
+            raise ParameterError(
+                f"flush_seconds must be a number of seconds >= 0, got {flush_seconds!r}"
+            )
         self.path = Path(path)
         self.force = bool(force)
         self._target = check_target(self.path, force=self.force)
         self.config = {} if config is None else dict(config)
-        json.dumps(self.config)  # fail early on anything that is not JSON
+        try:
+            json.dumps(self.config)  # fail early on anything that is not JSON
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(
+                f"config must be JSON-ready (numbers, strings, lists): {exc}"
+            ) from None
         self.chunk_rows = int(chunk_rows)
         self.flush_seconds = float(flush_seconds)
         self._sf: SafeFile | None = None
