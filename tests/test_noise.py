@@ -145,6 +145,19 @@ def test_bad_noise_on_a_problem_is_a_typed_one_line_error() -> None:
         dataclasses.replace(prob, noise=TransportNoise(site=0.1, seed=1))
     with pytest.raises(ParameterError, match="seed is required"):
         TransportNoise(np.zeros((1, 4, 4)))
+    good = 0.2 * np.stack([prob.algebra.random(i) for i in range(2)])
+    for fields, error, message in [  # a fields function is checked at the initial state
+        (lambda W: np.zeros((2, 3, 3)), ShapeError,
+         r"the fields function must return shape \(2, 4, 4\) .* got \(2, 3, 3\)"),
+        (lambda W: np.ones((2, 4, 4)), InvalidBError, "not in the normalizer so"),
+        (lambda W: 1 / 0, InvalidBError, "the fields function raised ZeroDivisionError"),
+        (lambda W: np.full((2, 4, 4), np.nan), InvalidBError, "non-finite"),
+    ]:  # fmt: skip
+        bad = dataclasses.replace(prob, noise=TransportNoise(fields, seed=1, count=2))
+        with pytest.raises(error, match=message):
+            iso.solve(bad, iso.StochasticIsoMP(), W0, dt=0.1, n_steps=1)
+    fine = dataclasses.replace(prob, noise=TransportNoise(lambda W: good, seed=1, count=2))
+    assert iso.solve(fine, iso.StochasticIsoMP(), W0, dt=0.1, n_steps=1).success
     with pytest.raises(ParameterError, match="rigid_body: noise_seed is required"):
         iso.models.rigid_body(3, noise=0.1)
     with pytest.raises(ParameterError, match="rigid_body: noise must be a finite number >= 0"):

@@ -391,6 +391,47 @@ class TransportNoise:
                     f"TransportNoise: site holds {self.site.shape[0]} amplitudes for {N} particles"
                 )
 
+    def check_fields_at(self, W: Array, algebra: Algebra) -> None:
+        """Raise if a callable ``fields`` does not give ``m`` fields of the normalizer per
+        member at the states ``W`` (``(*batch, *shape)``), as a step would use them.
+
+        Raises
+        ------
+        ShapeError, InvalidBError
+        """
+        if not callable(self.fields):
+            return
+        norm = algebra.normalizer
+        batch = algebra.batch_shape(W)
+        want = (*batch, int(self.count or 0), *norm.shape)
+        try:
+            F = np.asarray(self.fields(W))
+        except Exception as exc:
+            raise InvalidBError(
+                f"TransportNoise: the fields function raised {type(exc).__name__}: {exc}"
+            ) from exc
+        if F.shape != want:
+            raise ShapeError(
+                f"TransportNoise: the fields function must return shape {want} (the batch, "
+                f"count = {self.count} fields, the normalizer {norm.name}), got {F.shape}"
+            )
+        if not np.all(np.isfinite(F)):
+            raise InvalidBError("TransportNoise: the fields function returned non-finite values")
+        if F.dtype.kind == "c" and not norm.is_complex:
+            raise InvalidBError(
+                f"TransportNoise: complex fields cannot act on the real space {algebra.name}"
+            )
+        Fc = F.astype(norm.dtype).reshape(-1, *norm.shape)
+        dist = np.atleast_1d(norm.distance(Fc))
+        scale = np.atleast_1d(norm.norm(Fc))
+        bad = np.flatnonzero(dist > 1e-12 + 1e-8 * scale)
+        if bad.size:
+            raise InvalidBError(
+                f"TransportNoise: a field of the fields function is not in the normalizer "
+                f"{norm.name} of {algebra.name} (distance {float(dist[bad[0]]):.2e}): the flow "
+                "would leave the space"
+            )
+
     def particles(self, algebra: Algebra) -> int:
         """Particles with site noise (``0`` without)."""
         return 0 if self.site is None else int(algebra.shape[0])
