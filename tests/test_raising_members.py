@@ -81,6 +81,7 @@ def test_only_the_member_whose_b_raises_fails(path: str) -> None:
     assert list(sol.failure_reasons) == [(BAD,)]
     assert sol.failure_reasons[(BAD,)] == "B raised: ValueError: entry too large"
     assert f"(2,) at step {k} (B raised: ValueError" in sol.message
+    assert sol.message.endswith("The other members took every step.")  # no advice on dt
 
     others = np.delete(np.arange(4), BAD)
     alone = _solve(Y[others], limit, compiled, threads=_threads(path))  # without the bad one

@@ -93,6 +93,20 @@ def test_per_member_failure_is_reported_not_accepted() -> None:
         iso.solve(prob, iso.IsoMP(), W0s, dt=0.5, n_steps=2)
 
 
+def test_an_ensembles_failure_message_says_what_is_left() -> None:
+    prob, W0 = iso.models.rigid_body(3)
+    some = iso.solve(prob, iso.IsoMP(), np.stack([W0, 100 * W0]), dt=0.5, n_steps=3,
+                     throw=False, progress=False)  # fmt: skip
+    assert "1 of 2" in some.message and "The other members took every step." in some.message
+    assert some.message.endswith(
+        "Reduce dt (h * ||B(W)|| should stay well below 2) or change the solver."
+    )
+    every = iso.solve(prob, iso.IsoMP(), np.stack([300 * W0, 100 * W0]), dt=0.5, n_steps=3,
+                      throw=False, progress=False)  # fmt: skip
+    assert "2 of 2" in every.message and "No member is left." in every.message
+    assert "other members" not in every.message
+
+
 def test_stopping_rule_parameters_are_checked() -> None:
     with pytest.raises(ValueError, match="max_iter"):
         iso.FixedPoint(max_iter=0)

@@ -168,9 +168,16 @@ def describe(
     )
     more = f" and {idx.size - 5} more" if idx.size > 5 else ""
     total = int(np.prod(batch))
+    rest = "The other members took every step." if idx.size < total else "No member is left."
+    solves = [  # the advice is for a solve that failed, as for one system
+        int(failures.status[m]) not in (B_RAISED, LEFT_SPACE)
+        and not failures.state_non_finite(int(m))
+        for m in idx
+    ]
+    advice = f" {_ADVICE}" if any(solves) else ""
     return (
         f"{method}: {idx.size} of {total} ensemble member(s) failed and were frozen at their "
-        f"last good state: {shown}{more}. The other members took every step. {_ADVICE}"
+        f"last good state: {shown}{more}. {rest}{advice}"
     )
 
 
