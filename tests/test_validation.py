@@ -274,6 +274,8 @@ def test_B_that_raises_mid_run_keeps_the_run_so_far(W0) -> None:
         ({"y0": np.zeros((0, 3, 3))}, iso.ShapeError, "empty ensemble"),
         ({"save_every": 0}, iso.ParameterError, "save_every"),
         ({"save_every": 2.5}, iso.ParameterError, "save_every"),
+        ({"progress": "x"}, iso.ParameterError, "progress must be True, False or None, got 'x'"),
+        ({"throw": "no"}, iso.ParameterError, "throw must be True or False, got 'no'"),
     ],
 )
 def test_wrong_kinds_of_argument_get_typed_errors(so3_problem, W0, kwargs, error, match) -> None:

@@ -368,6 +368,7 @@ def solve(
     _check_objects(problem, method, writer)
     _check_save_every(save_every)
     _check_status_every(status_every)
+    _check_flags(progress, throw)
     dt_, n = time_grid(t0, t1, dt, n_steps)
     with compile_clock(show=progress is not False) as clock, run_threads(threads) as pools:
         W = _check_state(problem, y0, "y0")
@@ -390,6 +391,15 @@ def _check_status_every(status_every: Any) -> None:
         raise ParameterError(
             f"status_every must be a positive number of seconds or None, got {status_every!r}"
         )
+
+
+def _check_flags(progress: Any, throw: Any) -> None:
+    """``progress`` is a bool or ``None``, ``throw`` a bool (a string such as ``"no"`` would
+    count as true)."""
+    if progress is not None and not isinstance(progress, (bool, np.bool_)):
+        raise ParameterError(f"progress must be True, False or None, got {progress!r}")
+    if not isinstance(throw, (bool, np.bool_)):
+        raise ParameterError(f"throw must be True or False, got {throw!r}")
 
 
 def _check_save_every(save_every: Any) -> None:
@@ -482,6 +492,7 @@ def continue_run(
     ``status_every`` are as in :func:`solve`.
     """
     _check_status_every(status_every)
+    _check_flags(progress, throw)
     rs = restart
     with compile_clock(show=progress is not False) as clock, run_threads(threads) as pools:
         r = open_run(
