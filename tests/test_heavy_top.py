@@ -104,8 +104,11 @@ def test_parameters_units_and_errors() -> None:
         ({"inertia": [1.0, 0.0, 1.0]}, iso.ParameterError, "moments of inertia must be positive"),
         ({"mgl": -1.0}, iso.ParameterError, "mgl must be a number >= 0"),
         ({"Gamma0": [0.0, 0.0, 0.0]}, iso.ParameterError, "Gamma0 must be a nonzero vector"),
-        ({"M0": [0.0, np.nan, 1.0]}, iso.NonFiniteError, "heavy_top: M0"),
-        ({"inertia": [1.0, 2.0, 3.0]}, iso.ParameterError, "a Lagrange top needs I1 == I2"),
+        ({"M0": [0.0, np.nan, 1.0]}, iso.NonFiniteError, "heavy_top: M0 must be finite"),
+        ({"mgl": np.nan}, iso.NonFiniteError, "heavy_top: mgl must be finite (found NaN or Inf)"),
+        ({"inertia": [1.0, 2.0, 3.0]}, iso.ParameterError,
+         "a Lagrange top needs I1 == I2 and the centre of mass on e3, got inertia [1.0, 2.0, 3.0], "
+         "center [0.0, 0.0, 1.0]"),
         ({"top": "kovalevskaya", "center": [0, 0, 1]}, iso.ParameterError,
          "a Kovalevskaya top needs I1 == I2 == 2 I3"),
     ]  # fmt: skip

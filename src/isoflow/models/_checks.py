@@ -38,7 +38,7 @@ def real_parameter(value: ArrayLike, what: str) -> Array:
         raise DtypeError(f"{what} must be real numbers, got an array of dtype {arr.dtype}")
     arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):
-        raise NonFiniteError(f"All entries of {what} must be finite (found NaN or Inf).")
+        raise NonFiniteError(f"{what} must be finite (found NaN or Inf)")
     return arr
 
 

@@ -99,14 +99,14 @@ def _check_top(top: str, inertia: Array, center: Array) -> None:
     if top == "lagrange" and not (I1 == I2 and np.array_equal(center, [0.0, 0.0, 1.0])):
         raise ParameterError(
             f"heavy_top: a Lagrange top needs I1 == I2 and the centre of mass on e3, got "
-            f"inertia {tuple(inertia)}, center {tuple(center)} (use top='general')"
+            f"inertia {inertia.tolist()}, center {center.tolist()} (use top='general')"
         )
     if top == "kovalevskaya" and not (
         I1 == I2 == 2.0 * I3 and np.array_equal(center, [1.0, 0.0, 0.0])
     ):
         raise ParameterError(
             f"heavy_top: a Kovalevskaya top needs I1 == I2 == 2 I3 and the centre of mass on "
-            f"e1, got inertia {tuple(inertia)}, center {tuple(center)} (use top='general')"
+            f"e1, got inertia {inertia.tolist()}, center {center.tolist()} (use top='general')"
         )
 
 
