@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import importlib
 import json
 import tracemalloc
 from pathlib import Path
@@ -271,3 +272,31 @@ def test_bad_writer_arguments_are_one_line_parameter_errors(tmp_path: Path, kwar
     with pytest.raises(iso.ParameterError, match=match):
         io.HDF5Writer(tmp_path / "x.h5", **kwargs)
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_a_resume_writes_with_the_runs_recorded_chunk_rows_and_flush_interval(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The file records the writer's settings; :func:`isoflow.io.resume` (and so ``isoflow run
+    --resume``) writes with them unless given others (a run flushed every 300 s must not be
+    resumed into one that writes a checkpoint every second)."""
+    resume_module = importlib.import_module("isoflow.io.resume")  # the module, not the function
+    prob, W0 = iso.models.rigid_body(3)
+    seen: list[tuple[int, float]] = []
+    reopen = resume_module.HDF5Writer.reopen
+
+    def spy(*args: Any, **kw: Any) -> Any:
+        seen.append((kw["chunk_rows"], kw["flush_seconds"]))
+        return reopen(*args, **kw)
+
+    monkeypatch.setattr(resume_module.HDF5Writer, "reopen", spy)
+    for flush, recorded in ((300.0, 300.0), (np.inf, None)):
+        path = tmp_path / f"run_{flush}.h5"
+        writer = io.HDF5Writer(path, {}, chunk_rows=7, flush_seconds=flush)
+        iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=20, writer=writer, progress=False)
+        assert io.info(path)["meta"]["writer"] == {"chunk_rows": 7, "flush_seconds": recorded}
+        io.resume(path, problem=prob, method=iso.IsoMP(), progress=False)
+        io.resume(path, problem=prob, method=iso.IsoMP(), progress=False, chunk_rows=3,
+                  flush_seconds=0.5)  # fmt: skip
+        assert seen[-2:] == [(7, flush), (3, 0.5)]
+    assert resume_module._writer_settings({}, None, None) == (256, 1.0)  # an older file

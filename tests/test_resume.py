@@ -52,11 +52,9 @@ def test_sigkill_then_resume_is_bit_for_bit(tmp_path: Path) -> None:
     assert "killed?" in shown and re.search(r"^  resumable +yes$", shown, re.M)
 
     # resume, kill the resumed run again, resume again
-    proc = subprocess.Popen(
-        _cmd(
-            "run", "--resume", str(path), "--quiet", "--chunk-rows", "16", "--flush-seconds", "0.05"
-        ),
-        stderr=subprocess.DEVNULL,
+    assert io.info(path)["meta"]["writer"] == {"chunk_rows": 16, "flush_seconds": 0.05}
+    proc = subprocess.Popen(  # writes with the recorded 16 rows and 0.05 s
+        _cmd("run", "--resume", str(path), "--quiet"), stderr=subprocess.DEVNULL
     )
     _kill_when(path, len(part.ys) + 200, proc)
     out = subprocess.run(

@@ -111,14 +111,17 @@ def add_parser(sub: Any) -> None:
         help="any model parameter (repeatable; VALUE read as a TOML value)",
     )
     run.add_argument(
-        "--chunk-rows", type=positive_int, default=256, help="states per write (default 256)"
+        "--chunk-rows",
+        type=positive_int,
+        default=None,
+        help="states per write (default 256; on --resume the run's)",
     )
     run.add_argument(
         "--flush-seconds",
         type=positive_float,
-        default=1.0,
-        help="write the saved states and a checkpoint at least this often (default 1 s; a "
-        "kill loses at most the steps since the last checkpoint)",
+        default=None,
+        help="write the saved states and a checkpoint at least this often (default 1 s; on "
+        "--resume the run's; a kill loses at most the steps since the last checkpoint)",
     )
     run.add_argument(
         "--status-every",
@@ -127,7 +130,7 @@ def add_parser(sub: Any) -> None:
         dest="status_every",
         metavar="SECONDS",
         help="a status line on stderr this often: step, steps per second, projected end "
-        "(default 60 s; none with --quiet)",
+        "(default 60 s, on --resume too; none with --quiet)",
     )
     run.add_argument("--quiet", action="store_true", help="no progress bar, no status lines")
     add_thread_options(run)
@@ -211,7 +214,11 @@ def handle(args: argparse.Namespace) -> int:
     if not out:
         raise UserError("give the result file with --out FILE (or out = ... in the TOML)")
     writer = io.HDF5Writer(
-        out, cfg, chunk_rows=args.chunk_rows, flush_seconds=args.flush_seconds, force=args.force
+        out,
+        cfg,
+        chunk_rows=256 if args.chunk_rows is None else args.chunk_rows,
+        flush_seconds=1.0 if args.flush_seconds is None else args.flush_seconds,
+        force=args.force,
     )  # refuses an existing file without --force, and anything that is not a regular file
     problem, y0, method, kwargs = registry.build(cfg, model=spec)
     announce_compiles()

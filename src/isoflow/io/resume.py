@@ -20,6 +20,7 @@ for bit.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -105,8 +106,8 @@ def resume(
     params: Mapping[str, Any] | None = None,
     progress: bool | None = None,
     throw: bool = True,
-    chunk_rows: int = 256,
-    flush_seconds: float = 1.0,
+    chunk_rows: int | None = None,
+    flush_seconds: float | None = None,
     force: bool = False,
     threads: ThreadRequest = None,
     status_every: float | None = None,
@@ -132,7 +133,8 @@ def resume(
     progress, throw :
         As in :func:`isoflow.solve`.
     chunk_rows, flush_seconds :
-        As in :class:`~isoflow.io.HDF5Writer`.
+        As in :class:`~isoflow.io.HDF5Writer`; by default those the run was written with
+        (recorded in the file; 256 rows and 1 s for files that predate the record).
     force : bool
         Resume although the model differs from the one the run started with (see
         :class:`~isoflow.ModelChangedError`); the file keeps the fingerprint of the first.
@@ -208,6 +210,7 @@ def resume(
                     acc.set_first_state(first)
                 acc.absorb(data["ts"], {k: data[k] for k in names[2:]})
             _check_model(p, meta, problem, first, force)
+        chunk_rows, flush_seconds = _writer_settings(meta, chunk_rows, flush_seconds)
         if needs_rewrite:
             cp = recover(p, chunk_rows)
         writer = HDF5Writer.reopen(
@@ -223,3 +226,24 @@ def resume(
         restart, writer=writer, accumulator=acc, progress=progress, throw=throw, threads=threads,
         status_every=status_every,
     )  # fmt: skip
+
+
+def _writer_settings(
+    meta: Mapping[str, Any], chunk_rows: int | None, flush_seconds: float | None
+) -> tuple[int, float]:
+    """``(chunk_rows, flush_seconds)`` of a resume: those given, else the run's recorded ones
+    (the writer's defaults for a file without the record)."""
+    recorded = meta.get("writer")
+    recorded = recorded if isinstance(recorded, dict) else {}
+    if chunk_rows is None:
+        rows = recorded.get("chunk_rows")
+        ok = isinstance(rows, int) and not isinstance(rows, bool) and rows >= 1
+        chunk_rows = rows if ok else 256
+    if flush_seconds is None:
+        if "flush_seconds" in recorded and recorded["flush_seconds"] is None:
+            flush_seconds = math.inf  # the run wrote every chunk_rows states only
+        else:
+            f = recorded.get("flush_seconds")
+            ok = isinstance(f, (int, float)) and not isinstance(f, bool) and f >= 0
+            flush_seconds = float(f) if ok else 1.0
+    return chunk_rows, flush_seconds

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import stat
 from pathlib import Path
@@ -119,7 +120,7 @@ class HDF5Writer:
         if (
             isinstance(flush_seconds, bool)
             or not isinstance(flush_seconds, (int, float, np.integer, np.floating))
-            or not flush_seconds >= 0  # NaN fails too; inf flushes only at checkpoints
+            or not flush_seconds >= 0  # NaN fails too; inf: every chunk_rows states only
         ):
             raise ParameterError(
                 f"flush_seconds must be a number of seconds >= 0, got {flush_seconds!r}"
@@ -149,7 +150,9 @@ class HDF5Writer:
 
     def open(self, meta: dict[str, Any]) -> None:
         """Lock the path and create the file (as ``<path>.partial``) with its attributes."""
-        self._meta = dict(meta)
+        flush = self.flush_seconds if math.isfinite(self.flush_seconds) else None
+        # what a resume writes with unless told otherwise (:func:`isoflow.io.resume`)
+        self._meta = {**meta, "writer": {"chunk_rows": self.chunk_rows, "flush_seconds": flush}}
         self._target.parent.mkdir(parents=True, exist_ok=True)
         self._lock = WriteLock(self._target)
         try:
