@@ -235,15 +235,15 @@ def _writer_settings(
     (the writer's defaults for a file without the record)."""
     recorded = meta.get("writer")
     recorded = recorded if isinstance(recorded, dict) else {}
+    rows: Any = recorded.get("chunk_rows")
     if chunk_rows is None:
-        rows = recorded.get("chunk_rows")
         ok = isinstance(rows, int) and not isinstance(rows, bool) and rows >= 1
-        chunk_rows = rows if ok else 256
+        chunk_rows = int(rows) if ok else 256
+    flush: Any = recorded.get("flush_seconds", 1.0)
     if flush_seconds is None:
-        if "flush_seconds" in recorded and recorded["flush_seconds"] is None:
+        if flush is None:
             flush_seconds = math.inf  # the run wrote every chunk_rows states only
         else:
-            f = recorded.get("flush_seconds")
-            ok = isinstance(f, (int, float)) and not isinstance(f, bool) and f >= 0
-            flush_seconds = float(f) if ok else 1.0
+            ok = isinstance(flush, (int, float)) and not isinstance(flush, bool) and flush >= 0
+            flush_seconds = float(flush) if ok else 1.0
     return chunk_rows, flush_seconds
