@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from .._version import __version__
 from . import _bench, _demo, _info, _list, _plot, _reproduce, _run, _sweep
@@ -37,9 +38,17 @@ __all__ = ["main"]
 _COMMANDS = (_demo, _run, _info, _sweep, _plot, _reproduce, _list, _bench)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with a one-line error (the usage block stays with ``--help``); the
+    commands' parsers are of this class too (``add_subparsers`` takes the parent's)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The parser of the ``isoflow`` command: its options and every command's."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="isoflow",
         description="Structure-preserving integration of isospectral flows (IsoMP).",
     )
