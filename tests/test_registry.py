@@ -89,6 +89,12 @@ def test_config_from_toml_checks_out() -> None:
         registry.config_from_toml({"model": "rigid-body", "out": 7})
     cfg, out = registry.config_from_toml({"model": "rigid-body", "out": "a.h5"})
     assert out == "a.h5" and "out" not in cfg
+    with pytest.raises(
+        ConfigError, match=r"unknown option\(s\) foo \(known: .*n_steps, out, params"
+    ):
+        registry.config_from_toml({"model": "rigid-body", "foo": 1})  # a TOML file takes out
+    spins = registry.MODELS["spin-chain"].params["noise_seed"].help
+    assert spins.endswith("(required with temperature > 0)")
 
 
 def test_size_bounds_refuse_before_building(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -83,9 +83,14 @@ def add_parser(sub: Any) -> None:
     solvers = ", ".join(registry.SOLVERS)
     run.add_argument("--method", help="a method of 'isoflow list methods' (default isomp)")
     run.add_argument("--solver", help=f"one of: {solvers} (default fixed-point)")
-    run.add_argument("--rtol", type=positive_float, help="nonlinear solver tolerance")
     run.add_argument(
-        "--anderson", type=anderson_memory, metavar="M", help="Anderson memory of the fixed point"
+        "--rtol", type=positive_float, help="nonlinear solver tolerance (default 1e-14)"
+    )
+    run.add_argument(
+        "--anderson",
+        type=anderson_memory,
+        metavar="M",
+        help="Anderson memory of the fixed point (default 0: plain iteration)",
     )
     run.add_argument("--t0", type=finite_float, help="start time (default 0)")
     run.add_argument("--t1", type=finite_float, help="final time")

@@ -210,13 +210,15 @@ def _sphere_data_params(what: str) -> dict[str, Param]:
             low=0,
             length=2,
         ),
-        "energy_rate": Param(float, None, "mean energy injection of the forcing band", low=0.0),
-        "forcing_seed": Param(int, None, "seed of the forcing noise", low=0),
+        "energy_rate": Param(
+            float, None, "mean energy injection of the forcing band (default 1.0)", low=0.0
+        ),
+        "forcing_seed": Param(int, None, "seed of the forcing noise (default 0)", low=0),
     }
 
 
-def _noise_seed() -> Param:
-    return Param(int, None, "seed of the noise's increments (required with noise)", low=0)
+def _noise_seed(needed_with: str = "noise") -> Param:
+    return Param(int, None, f"seed of the noise's increments (required with {needed_with})", low=0)
 
 
 def _thermal() -> dict[str, Param]:
@@ -224,7 +226,7 @@ def _thermal() -> dict[str, Param]:
     return {
         "temperature": Param(float, 0.0, "temperature k_B T (needs damping > 0)", low=0.0),
         "damping": Param(float, 0.0, "Gilbert damping lambda", low=0.0),
-        "noise_seed": _noise_seed(),
+        "noise_seed": _noise_seed("temperature > 0"),
     }
 
 

@@ -164,6 +164,12 @@ def config_from_toml(table: Mapping[str, Any]) -> tuple[dict[str, Any], str | No
     out = cfg.pop("out", None)
     if out is not None and not (isinstance(out, str) and out):
         raise ConfigError(f"out must be a file name (a string), got {out!r}")
+    unknown = set(cfg) - _RUN_KEYS
+    if unknown:  # here, so that the keys listed include the file's own ``out``
+        raise ConfigError(
+            f"unknown option(s) {', '.join(sorted(map(str, unknown)))} "
+            f"(known: {', '.join(sorted(_RUN_KEYS | {'out'}))})"
+        )
     return cfg, out
 
 
