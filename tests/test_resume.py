@@ -65,3 +65,8 @@ def test_sigkill_then_resume_is_bit_for_bit(tmp_path: Path) -> None:
     assert got.complete and got.run_info["status"] == 0
     assert got.ys.tobytes() == ref.ys.tobytes() and np.array_equal(got.ts, ref.ts)
     assert got.drifts == ref.drifts
+    st = got.run_info["stats"]  # the counters are the last call's, and say which steps
+    assert st["n_steps"] == 48000 and 0 < st["first_step"] < 48000
+    assert st["iterations_mean"] == st["n_iterations"] / (48000 - st["first_step"])
+    shown = subprocess.run(_cmd("info", str(path)), capture_output=True, text=True).stdout
+    assert f"steps {st['first_step'] + 1} to 48000: the resumed part" in shown

@@ -32,7 +32,12 @@ class SolveStats:
     Attributes
     ----------
     n_steps : int
-        Steps completed (see :attr:`Solution.failed_step` for members that stopped earlier).
+        Steps completed (see :attr:`Solution.failed_step` for members that stopped earlier),
+        counted from ``t0``: a resumed run's include those before its checkpoint.
+    first_step : int
+        The step this call started from: 0, or the checkpoint's step for a resumed run. The
+        counters below (iterations, evaluations, times) are of the steps ``first_step + 1 ..
+        n_steps``, the ones this call took.
     n_iterations : int
         Nonlinear iterations summed over steps and members (0 for explicit methods).
     n_B_evaluations : int
@@ -58,6 +63,7 @@ class SolveStats:
     """
 
     n_steps: int = 0
+    first_step: int = 0
     n_iterations: int = 0
     n_B_evaluations: int = 0
     iterations_mean: float = 0.0

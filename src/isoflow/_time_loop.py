@@ -441,6 +441,7 @@ def _stats(
     its = runner.iterations_total
     return SolveStats(
         n_steps=runner.k,
+        first_step=k0,
         n_iterations=its,
         n_B_evaluations=int(runner.b_evaluations),
         iterations_mean=its / max(member_steps, 1),

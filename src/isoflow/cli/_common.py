@@ -143,7 +143,11 @@ def summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
     d = sol.diagnostics.summary() if sol.diagnostics is not None else {}
     st = sol.stats
     rows = [
-        ("steps", f"{st.n_steps} of {sol.n_steps}"),
+        (
+            "steps",
+            f"{st.n_steps} of {sol.n_steps}"
+            + (f" (this call: {st.first_step + 1} to {st.n_steps})" if st.first_step else ""),
+        ),
         (
             "wall time",
             f"{st.wall_time:.2f} s"

@@ -85,11 +85,13 @@ def _info_file(args: argparse.Namespace) -> int:
     ]
     if run_info is not None:
         st = run_info.get("stats", {})
+        first = st.get("first_step", 0)
+        part = f", steps {first + 1} to {st.get('n_steps')}: the resumed part" if first else ""
         rows.append(
             (
                 "wall time",
                 f"{st.get('wall_time', float('nan')):.2f} s "
-                f"(iterations mean {st.get('iterations_mean', float('nan')):.2f})",
+                f"(iterations mean {st.get('iterations_mean', float('nan')):.2f}{part})",
             )
         )
         if isinstance(st.get("threads"), dict):  # older files do not record them
