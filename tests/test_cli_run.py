@@ -146,6 +146,11 @@ def mistakes_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         (["info", "cut.h5"], 1, r"truncated"),
         (["plot", "good.h5", "--out", "fig.bmp"], 1, r"choose a .png, .pdf or .svg"),
         (
+            ["plot", "good.h5", "--out", "nodir/fig.png"],
+            1,
+            r"nodir/fig.png: no directory nodir to write it in$",
+        ),
+        (
             ["run", "rigid-body", "--dt", "0.1", "--t1", "1", "--out", "good.h5"],
             1,
             r"good.h5 exists \(use --force",

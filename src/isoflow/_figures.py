@@ -60,10 +60,15 @@ def save(fig: Figure, path: str | os.PathLike[str], *, force: bool = False) -> P
         Another suffix.
     FileExistsError
         ``path`` exists and ``force`` is false, or it is not a regular file.
+    FileNotFoundError
+        The directory of ``path`` does not exist (it is not created: a mistyped path).
     """
     p = Path(path)
     if p.suffix.lower() not in SUFFIXES:
         raise ValueError(f"{p}: choose a .png, .pdf or .svg file name")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{p}: no directory {folder} to write it in")
     if p.exists() or p.is_symlink():
         if not p.is_file():
             raise FileExistsError(f"{p} exists and is not a regular file; not replacing it")
