@@ -43,6 +43,10 @@ def test_user_model_streams_and_resumes_bit_for_bit_when_named_again(tmp_path: P
         ([], rf"not built in.*--resume FILE --model {TOY}"),
         (["--model", "user_models:compiled_toy"], rf"written by model '{TOY}', not"),
         (["--model", TOY, "--param", "n=5"], r"parameter n = 5 differs from the run's n = 4"),
+        (
+            ["--model", TOY, "--param", "seed=1"],
+            r"seed = 1 differs from the run's seed = 0 \(the model function's default\)",
+        ),
         (["--model", TOY, "--dt", "0.02"], r"--dt cannot change it"),
         (["--model", TOY, "--out", "x.h5"], r"--out cannot change it"),
         (["--param", "n=4"], r"--param on --resume needs the model"),
@@ -51,8 +55,19 @@ def test_user_model_streams_and_resumes_bit_for_bit_when_named_again(tmp_path: P
         assert res.returncode == 1, (args, res.stderr)
         assert re.search(pattern, one_error_line(res.stderr)), (args, res.stderr)
 
-    res = run_cli("run", "--resume", str(path), "--model", TOY, "--param", "n=4", "--quiet",
-                  env=env)  # fmt: skip
+    res = run_cli(
+        "run",
+        "--resume",
+        str(path),
+        "--model",
+        TOY,
+        "--param",
+        "n=4",
+        "--param",
+        "seed=0",
+        "--quiet",
+        env=env,
+    )  # fmt: skip  (seed: the default, not recorded)
     assert res.returncode == 0, res.stderr
     got = io.load(path)
     assert got.complete and got.run_info["status"] == 0

@@ -11,6 +11,7 @@ build the recorded space and state shape (:func:`check_recorded_state`).
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from typing import Any
 
@@ -96,12 +97,38 @@ def check_recorded_model(
         merged = dict(recorded.get("params") or {}) | dict(params)
         again = normalize_config(dict(recorded, params=merged), model=model)["params"]
         for key in params:
-            if again.get(key) != cfg["params"].get(key):
+            if key in cfg["params"]:
+                was, what = cfg["params"][key], "recorded in the file"
+            else:  # not recorded: the run took the model function's default
+                was, what = _function_default(model, key), "(the model function's default)"
+            if not _same_value(again.get(key), was):
                 raise ConfigError(
                     f"parameter {key} = {again.get(key)!r} differs from the run's "
-                    f"{key} = {cfg['params'].get(key)!r} recorded in the file"
+                    f"{key} = {was!r} {what}"
                 )
     return cfg
+
+
+def _function_default(model: ModelSpec, key: str) -> Any:
+    """The default of the model function's keyword ``key`` (``None`` if it has none or
+    cannot be read)."""
+    try:
+        found = inspect.signature(model.function()).parameters.get(key)
+    except (TypeError, ValueError):
+        return None
+    if found is None or found.default is inspect.Parameter.empty:
+        return None
+    return found.default
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """``a == b``, lists and tuples compared entry by entry (TOML gives lists)."""
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b, strict=True))
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
 
 
 def check_recorded_state(meta: Mapping[str, Any], problem: IsospectralProblem, y0: Any) -> None:
