@@ -231,6 +231,31 @@ def test_products_converge_to_products_of_functions() -> None:
     assert np.all(rates > 1.9) and errs[-1] < 1e-3
 
 
+def test_the_bases_are_computed_once_per_size_within_the_budget(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The transforms keep the bases of the last ``N`` (within ``BASES_CACHE_BYTES``): the
+    tridiagonal eigensolves run once, the kept arrays cannot be written, and the coefficients
+    are those computed afresh bit for bit (the spectra of every saved chunk of a forced run
+    cost products, not ``N`` eigensolves)."""
+    from isoflow.sphere import _basis
+
+    calls = []
+    raw = _basis._raw_eigenvectors
+    monkeypatch.setattr(_basis, "_raw_eigenvectors", lambda N, m: (calls.append(m), raw(N, m))[1])
+    monkeypatch.setattr(_basis, "_bases_kept", [])
+    W = np.stack([iso.models.euler_sphere(N=24, seed=s)[1] for s in range(3)])
+    first = sphere.to_coefficients(W)
+    assert len(calls) == 24
+    back = sphere.from_coefficients(first, 24)
+    assert len(calls) == 24  # no eigensolve after the first transform
+    assert all(not V.flags.writeable for V in _basis._bases_kept[0][1])
+    monkeypatch.setattr(_basis, "BASES_CACHE_BYTES", 0)  # nothing kept: computed afresh
+    assert sphere.to_coefficients(W).tobytes() == first.tobytes()
+    assert sphere.from_coefficients(first, 24).tobytes() == back.tobytes()
+    assert len(calls) == 24 + 2 * 24
+
+
 @pytest.mark.parametrize("N", [2, 5, 16, 41])
 def test_coefficient_round_trips(N: int) -> None:
     c = np.random.default_rng(N).standard_normal((2, N * N - 1))
