@@ -352,6 +352,73 @@ def test_a_users_linear_part_and_forcing_go_through_the_same_hook(compiled: bool
     assert float(np.abs(sol.ys[-1] - exact).max()) < 1e-13
 
 
+def test_noise_modes_are_sparse_rows_with_the_dense_modes_values() -> None:
+    """A half step's noise modes are sparse rows (a real harmonic lives on two diagonals:
+    ``2 (N - |m|)`` entries, ``N`` for ``m = 0``), equal to the dense modes: a forcing band at
+    ``N = 512`` took a dense ``N x N`` matrix a mode (a band around ``l = 40`` several GB)."""
+    from isoflow.splitting import half_step
+
+    N = 24
+    lin = SphereDissipation(N, degree_rates(N, viscosity=1e-3))
+    idx = np.arange(0, N * N - 1, 5)
+    sparse_rows = lin.mode_patterns(idx)
+    assert np.array_equal(sparse_rows.toarray(), lin.modes(idx).reshape(idx.size, -1))
+    _, ms = iso.sphere.degree_order(N - 1)
+    nnz = np.diff(sparse_rows.indptr)
+    assert np.all(nnz <= np.where(ms[idx] == 0, N, 2 * (N - np.abs(ms[idx]))))  # exact 0s go
+    part = iso.ModalLinearPart(_orthonormal_modes(iso.algebras.so(4), 3), np.ones(3))
+    assert np.array_equal(part.mode_patterns([2, 0]).toarray(), part.modes([2, 0]).reshape(2, -1))
+    prob, _ = iso.models.euler_sphere(N=N, seed=1, viscosity=1e-3, forcing_band=(8, 2))
+    noise = half_step(prob, 0.05).noise
+    assert noise.shape == (sum(2 * deg + 1 for deg in range(6, 11)), N * N)
+    assert noise.nnz <= 2 * N * noise.shape[0]
+
+
+@pytest.mark.parametrize(
+    "flow",
+    [
+        "sphere",
+        pytest.param("uniform", marks=pytest.mark.slow),
+        pytest.param("modal", marks=pytest.mark.slow),
+        pytest.param("none", marks=pytest.mark.slow),
+    ],
+)
+def test_an_ensemble_of_split_steps_runs_on_numba_threads(flow: str) -> None:
+    """Members of a split step on two numba threads (the parallel driver) take the steps they
+    take one after another, bit for bit, for every kind of compiled flow (the parameters of a
+    nested flow record failed to compile in the parallel driver)."""
+    if flow == "modal":
+        alg = iso.algebras.so(4)
+        part = iso.ModalLinearPart(_orthonormal_modes(alg, 3), np.array([0.5, 2.0, 0.0]))
+        prob = iso.IsospectralProblem(
+            algebra=alg, kernel=iso.ElementwiseLinear(np.ones((4, 4))), linear_part=part
+        )
+        Y0 = np.stack([np.asarray(alg.random(seed=s)) for s in range(3)])
+    else:
+        kw = {
+            "sphere": {"viscosity": 1e-3, "forcing_band": (4, 1)},
+            "uniform": {"drag": 0.1},
+            "none": {"forcing_band": (4, 1)},
+        }[flow]
+        prob, W0 = iso.models.euler_sphere(N=10, seed=1, **kw)
+        Y0 = np.stack([W0, prob.algebra.project(1.1 * W0), prob.algebra.project(0.9 * W0)])
+    runs = [
+        iso.solve(
+            prob,
+            iso.Strang(),
+            Y0,
+            dt=0.02,
+            n_steps=6,
+            progress=False,
+            threads={"blas": 1, "numba": k},
+        )
+        for k in (1, 2)
+    ]
+    assert [r.stats.threads["numba"] for r in runs] == [1, 2]
+    assert all("compiled" in r.stats.runner for r in runs)
+    assert runs[0].ys.tobytes() == runs[1].ys.tobytes()
+
+
 @pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
 def test_a_time_dependent_forcing_is_second_order(compiled: bool) -> None:
     """``F(t) = cos(3t) F_0`` with drag on the sphere and ``B = 0``: the error of the split step

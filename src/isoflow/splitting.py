@@ -145,6 +145,23 @@ class LinearPart(ABC):
     def modes(self, index: ArrayLike) -> Array:
         """The basis elements :math:`e_j` of the modes ``index``, ``(r, *core)``."""
 
+    def mode_patterns(self, index: ArrayLike) -> Any:
+        """The modes ``index`` as the rows of a sparse ``(r, prod(core))`` matrix
+        (``scipy.sparse.csr_array``, sorted indices, no stored zeros): what a half step adds
+        of a stochastic forcing. By default :meth:`modes` sparsified a few at a time; a part
+        whose modes are sparse builds them directly (the sphere's: two diagonals each)."""
+        from scipy import sparse
+
+        idx = np.asarray(index, dtype=np.int64).reshape(-1)
+        rows = [
+            sparse.csr_array(self.modes(idx[k : k + 64]).reshape(len(idx[k : k + 64]), -1))
+            for k in range(0, idx.size, 64)
+        ]
+        out = sparse.csr_array(sparse.vstack(rows, format="csr"))
+        out.eliminate_zeros()
+        out.sort_indices()
+        return out
+
     @abstractmethod
     def compiled(self, taus: Sequence[float], algebra: Algebra) -> Any:
         """The record the compiled split stage applies for the half steps ``taus``."""
@@ -355,7 +372,7 @@ class HalfStep:
 
     steady: Array | None
     responses: Array | None  # (R_d, *core)
-    noise: Array | None  # (R_s, *core)
+    noise: Any  # (R_s, prod(core)) scipy.sparse.csr_array, or None
 
 
 Deterministic = list[tuple[Forcing, Array]]
@@ -393,12 +410,17 @@ def half_step(problem: IsospectralProblem, tau: float) -> HalfStep:
     for _, modes, sigma in sto:
         assert lin is not None
         scale = sigma * ou_scales(lin.rates[modes], tau)
-        E = lin.modes(modes)
-        noise.append(E * scale.reshape(-1, *([1] * (E.ndim - 1))))
+        E = lin.mode_patterns(modes)  # sparse: a band of harmonics is two diagonals each
+        E.data *= np.repeat(scale, np.diff(E.indptr))  # row j times its deviation
+        noise.append(E)
+    if noise:
+        from scipy import sparse
+
+        stacked = sparse.csr_array(sparse.vstack(noise, format="csr"))
     return HalfStep(
         steady,
         np.concatenate(responses) if responses else None,
-        np.concatenate(noise) if noise else None,
+        stacked if noise else None,
     )
 
 

@@ -185,11 +185,14 @@ class Strang(Method):
         if terms.steady is not None:
             W = W + terms.steady
         rd = 0 if terms.responses is None else len(terms.responses)
-        for patterns, cols in ((terms.responses, slice(0, rd)), (terms.noise, slice(rd, None))):
-            if patterns is None:
-                continue
+        if terms.responses is not None:
             assert data is not None
-            W = W + np.tensordot(data[..., cols], patterns, axes=(-1, 0))
+            W = W + np.tensordot(data[..., :rd], terms.responses, axes=(-1, 0))
+        if terms.noise is not None:  # sparse (R_s, S): the normals times their modes
+            assert data is not None
+            xi = np.asarray(data[..., rd:], dtype=np.float64)
+            add = (terms.noise.T @ xi.reshape(-1, xi.shape[-1]).T).T
+            W = W + add.reshape(W.shape)
         return W
 
     def step(

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError, ShapeError
 from ..splitting import LinearPart, StochasticForcing, decay_factors, phi_factors
-from ._basis import from_coefficients, lm_index
+from ._basis import bases, degree_order, from_coefficients, lm_index
 from ._operators import check_N, laplacian_block
 
 __all__ = ["SphereDissipation", "band_forcing", "band_modes", "degree_rates", "folded_blocks"]
@@ -208,6 +208,52 @@ class SphereDissipation(LinearPart):
         coef = np.zeros((idx.size, self.N * self.N - 1))
         coef[np.arange(idx.size), idx] = 1.0
         return from_coefficients(coef, self.N)
+
+    def mode_patterns(self, index: ArrayLike) -> Any:
+        """The real harmonics ``index`` as sparse rows of ``N^2`` entries, built diagonal by
+        diagonal: harmonic ``(l, m)`` lives on the diagonals ``m`` and ``-m`` (``2 (N - |m|)``
+        entries), so a forcing band costs ``O(N)`` memory a mode instead of a dense ``N x N``
+        matrix (:meth:`modes` gives the same values)."""
+        from scipy import sparse
+
+        N = self.N
+        idx = np.asarray(index, dtype=np.int64).reshape(-1)
+        ls_all, ms_all = degree_order(N - 1)
+        ls, ms = ls_all[idx], ms_all[idx]
+        scale = float(np.sqrt(N / (4.0 * np.pi)))  # the basis' norm, as from_coefficients
+        indptr = np.zeros(idx.size + 1, dtype=np.int64)
+        per_row: list[tuple[Array, Array]] = [(np.zeros(0, np.int64), np.zeros(0, complex))] * (
+            idx.size
+        )
+        wanted = np.unique(np.abs(ms))
+        for m, V in bases(N, int(wanted.max()) if wanted.size else 0):
+            rows = np.flatnonzero(np.abs(ms) == m)
+            if rows.size == 0:
+                continue
+            i = np.arange(N - m)
+            for r in rows:
+                col = V[:, ls[r] - m] * scale
+                if m == 0:
+                    per_row[r] = (i * N + i, 1j * col)
+                    continue
+                sign = -1.0 if m % 2 else 1.0
+                z = 1j if ms[r] > 0 else 1.0  # the imaginary (m > 0) or real (m < 0) part
+                low = (sign / np.sqrt(2.0)) * (z * col + 0j)
+                flat = np.concatenate([(i + m) * N + i, i * N + i + m])
+                vals = np.concatenate([low, -np.conj(low)])
+                order = np.argsort(flat, kind="stable")
+                per_row[r] = (flat[order], vals[order])
+        indptr[1:] = np.cumsum([len(f) for f, _ in per_row])
+        out = sparse.csr_array(
+            (
+                np.concatenate([v for _, v in per_row]) if idx.size else np.zeros(0, complex),
+                np.concatenate([f for f, _ in per_row]) if idx.size else np.zeros(0, np.int64),
+                indptr,
+            ),
+            shape=(idx.size, N * N),
+        )
+        out.eliminate_zeros()
+        return out
 
     def compiled(self, taus: Sequence[float], algebra: Any) -> Any:
         from .compiled import SphereFlow

@@ -436,7 +436,22 @@ def dissipate(W, data, offe, offo):  # type: ignore[no-untyped-def]
     _scatter_diagonals(W, Dr, Di)
 
 
-@provide_flow(SphereFlow)
+class SplitSphereFlow(NamedTuple):
+    """The split stage's flat parameters with a :class:`SphereFlow`
+    (:class:`isoflow._compiled.stages.split.SplitNoFlow` says why flat)."""
+
+    taus: NDArray[Any]
+    indptr: NDArray[np.int64]
+    idx: NDArray[np.int64]
+    val: NDArray[Any]
+    amp: NDArray[np.int64]
+    N: int
+    data: NDArray[Any]
+    offe: NDArray[np.int64]
+    offo: NDArray[np.int64]
+
+
+@provide_flow(SphereFlow, SplitSphereFlow)
 @numba.njit(cache=True)
 def _sphere_flow(flow, W, j):  # type: ignore[no-untyped-def]
     N = flow.N
