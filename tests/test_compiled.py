@@ -426,6 +426,9 @@ def test_compiled_b_is_checked() -> None:
         iso.CompiledB(lambda W, out: None)
     with pytest.raises(TypeError, match="args must be a tuple"):
         iso.CompiledB(uk.neighbours, [1.0])
+    for nested in ((np.ones(2), 1.0), [1.0], {"c": 1.0}):  # numba's threads fail on these
+        with pytest.raises(TypeError, match=r"CompiledB: args\[1\] is a .*flatten it"):
+            iso.CompiledB(uk.neighbours, (np.ones(3), nested))
     bad = iso.IsospectralProblem(algebra=alg, kernel=iso.CompiledB(uk.returns_nothing_useful))
     with pytest.raises(iso.InvalidBError, match="does not compile"):
         iso.solve(bad, IsoMP(), alg.random(0), dt=0.1, n_steps=2)

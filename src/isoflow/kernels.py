@@ -135,7 +135,9 @@ class CompiledB(Kernel):
         shape and the normalizer's dtype and holds garbage on entry (write every entry).
         ``f`` must not keep references to ``W`` or ``out`` and must not modify ``W``.
     args : tuple
-        Extra arguments passed to ``f`` after ``out`` (parameter arrays, numbers). They are
+        Extra arguments passed to ``f`` after ``out``: arrays and numbers, not nested tuples,
+        lists or dicts (an ensemble's members run on numba threads, which cannot be handed
+        a tuple nested in the arguments). They are
         passed unchanged on every call; arrays are not copied, so do not modify them during a
         run.
     name : str, optional
@@ -185,6 +187,13 @@ class CompiledB(Kernel):
             )
         if not isinstance(args, tuple):
             raise TypeError(f"CompiledB: args must be a tuple, got {type(args).__name__}")
+        for k, a in enumerate(args):
+            if isinstance(a, (tuple, list, dict)):
+                raise TypeError(
+                    f"CompiledB: args[{k}] is a {type(a).__name__}; give arrays and numbers "
+                    "only (numba's threads cannot be handed a tuple nested in the arguments: "
+                    "flatten it, e.g. (C, (a, b)) -> (C, a, b))"
+                )
         if not isinstance(raises, bool):
             raise TypeError(f"CompiledB: raises must be True or False, got {raises!r}")
         self.f = f
