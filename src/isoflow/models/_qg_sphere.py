@@ -60,6 +60,7 @@ from ..sphere import (
     laplacian_coefficients,
     to_coefficients,
 )
+from ..sphere._basis import blocked_rows_matmul
 from ..sphere._operators import as_matrices, check_N, factor_diagonals
 from ._checks import require_memory
 from ._euler_sphere import coriolis_matrix, euler_sphere, initial_vorticity, real_parameter
@@ -161,7 +162,7 @@ def zonal_wind(P: ArrayLike, colatitudes: ArrayLike) -> Array:
     ls = np.arange(1, N)
     idx = ls * ls - 1 + ls  # lm_index(l, 0)
     dY = np.sqrt((2 * ls + 1) / (4 * np.pi))[:, None] * lpmv(1, ls[:, None], np.cos(theta))
-    return psi[..., idx] @ dY
+    return blocked_rows_matmul(psi[..., idx], dY)  # a row's wind whatever the batch
 
 
 def qg_sphere(

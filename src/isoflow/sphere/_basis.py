@@ -301,7 +301,8 @@ def to_coefficients(W: ArrayLike, lmax: int | None = None) -> Array:
     if lmax > N - 1:
         raise ParameterError(f"to_coefficients: lmax must be <= N - 1 = {N - 1}, got {lmax}")
     batch = Wa.shape[:-2]
-    flat = Wa.reshape(-1, N, N).astype(np.complex128, copy=False)
+    flat = _in_blocks(Wa.reshape(-1, N, N).astype(np.complex128, copy=False))
+    rows = int(np.prod(batch, dtype=np.int64))
     out = np.zeros((flat.shape[0], coefficient_count(lmax)))
     scale = _norm(N)
     for m, V in bases(N, lmax):
@@ -316,4 +317,30 @@ def to_coefficients(W: ArrayLike, lmax: int | None = None) -> Array:
         z = (w @ cols) * (sign * np.sqrt(2.0))
         out[:, lm_index(ls, m)] = z.imag
         out[:, lm_index(ls, -m)] = z.real
-    return out.reshape(*batch, out.shape[-1])
+    return out[:rows].reshape(*batch, out.shape[-1])
+
+
+#: Rows of the transforms' products are padded to a multiple of this: each row's
+#: coefficients then come from products of the same shape whatever the number of rows, so they
+#: do not depend on how the states were batched (BLAS takes other paths, with other roundings,
+#: for one row or a few than for many). A run's saved diagnostics are then the same in every
+#: run, however its flushes cut the saved states into batches.
+TRANSFORM_BLOCK = 8
+
+
+def blocked_rows_matmul(A: Array, B: Array) -> Array:
+    """``A @ B`` for ``A`` of shape ``(*batch, k)`` with the rows of ``A`` in blocks of
+    :data:`TRANSFORM_BLOCK` (zero rows appended): each row's result whatever the batch."""
+    a = np.asarray(A)
+    flat = a.reshape(-1, a.shape[-1])
+    out = _in_blocks(flat) @ B
+    return out[: flat.shape[0]].reshape(*a.shape[:-1], *out.shape[1:])
+
+
+def _in_blocks(flat: Array) -> Array:
+    """``flat`` (``(b, ...)``) with zero rows appended up to a multiple of
+    :data:`TRANSFORM_BLOCK`."""
+    pad = -flat.shape[0] % TRANSFORM_BLOCK
+    if pad == 0:
+        return flat
+    return np.concatenate([flat, np.zeros((pad, *flat.shape[1:]), dtype=flat.dtype)])

@@ -160,9 +160,12 @@ def angular_momentum(W: ArrayLike) -> Array:
     Om = -1j * flat
     a = np.arange(N - 1)
     c = np.sqrt((a + 1.0) * (N - a - 1.0))  # (J_+)_{a+1, a}
-    tp = np.sum(c * Om[:, a, a + 1], axis=-1)  # Tr(J_+ Om)
-    tm = np.sum(c * Om[:, a + 1, a], axis=-1)  # Tr(J_- Om)
-    t3 = np.sum((np.arange(N) - 0.5 * (N - 1)) * np.diagonal(Om, axis1=-2, axis2=-1), axis=-1)
+    # contiguous rows: each row summed the same way whatever the batch (a strided reduction
+    # sums in another order, and which one depends on the number of rows)
+    tp = np.sum(np.ascontiguousarray(c * Om[:, a, a + 1]), axis=-1)  # Tr(J_+ Om)
+    tm = np.sum(np.ascontiguousarray(c * Om[:, a + 1, a]), axis=-1)  # Tr(J_- Om)
+    d = np.ascontiguousarray((np.arange(N) - 0.5 * (N - 1)) * np.diagonal(Om, axis1=-2, axis2=-1))
+    t3 = np.sum(d, axis=-1)
     tx = 0.5 * (tp + tm)
     ty = -0.5j * (tp - tm)
     L = np.stack([tx.real, ty.real, t3.real], axis=-1) * (4.0 * np.pi / N * hbar(N))
