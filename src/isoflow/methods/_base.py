@@ -124,8 +124,9 @@ class Method:
     #: (:meth:`step_data`), handed to :meth:`step` as ``data`` by the time loop, so that a
     #: resumed or split run reads the same.
     reads_step_data: ClassVar[bool] = False
-    #: Whether the steps integrate a problem's transport noise (:class:`~isoflow.noise.
-    #: TransportNoise`) from their step data; the others refuse a problem with noise.
+    #: Whether the steps integrate a problem's transport noise
+    #: (:class:`~isoflow.noise.TransportNoise`) from their step data; the others refuse a
+    #: problem with noise.
     integrates_noise: ClassVar[bool] = False
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
