@@ -156,6 +156,29 @@ def test_grouping_by_parameters_without_initial_data() -> None:
     assert len({t.id for t in spec.tasks}) == len(spec.tasks)
 
 
+def test_initial_data_that_changes_the_model_is_refused() -> None:
+    """A parameter listed in ``initial`` groups members into one task, which runs them all with
+    the first member's ``B``: one that changes the model is refused (a built-in model's when
+    the sweep is read, a user's model's when its task is built), not run silently wrong."""
+    from isoflow.sweep import SweepError
+    from isoflow.sweep.task import build_task
+
+    with pytest.raises(SweepError, match=r"initial: omega of the built-in model 'euler-sphere' "
+                       r"changes the model, not only the initial state"):  # fmt: skip
+        read_spec({"model": "euler-sphere", "initial": ["omega"], "dt": 0.01, "n_steps": 2,
+                   "params": {"N": 8}, "grid": {"omega": [0.0, 5.0]}})  # fmt: skip
+    base = {"model": "user_models:scaled_rigid_body", "dt": 0.05, "n_steps": 2,
+            "members_per_task": 4}  # fmt: skip
+    spec = read_spec(base | {"initial": ["c"], "grid": {"c": [1.0, 2.0]}})
+    assert len(spec.tasks) == 1
+    with pytest.raises(SweepError, match=r"members 0 and 1 share a task but c change the model "
+                       r"\(B differs"):  # fmt: skip
+        build_task(spec, spec.tasks[0])
+    fine = read_spec(base | {"initial": ["seed"], "grid": {"seed": [0, 1, 2]}})
+    _, Y, _, _ = build_task(fine, fine.tasks[0])
+    assert Y.shape == (3, 4, 4) and len(fine.tasks) == 1
+
+
 def test_task_names_are_stable_across_processes_and_key_order() -> None:
     spec = read_spec(RIGID)
     reordered = dict(reversed(list(RIGID.items())))

@@ -68,3 +68,11 @@ TOY_SPEC = ModelSpec(
     },
     "a toy rigid body",
 )
+
+
+def scaled_rigid_body(c: float = 1.0, seed: int = 0):
+    """The rigid body of :func:`toy_rigid_body` with its field scaled by ``c`` (a parameter
+    that changes ``B``, not the state's shape)."""
+    problem, W0 = toy_rigid_body(seed=seed)
+    B = problem.B
+    return iso.IsospectralProblem(B=lambda W: c * B(W), algebra=problem.algebra), W0

@@ -416,6 +416,14 @@ def _build(table: dict[str, Any]) -> SweepSpec:
         for k in initial:
             if k not in model.params:
                 raise SweepError(f"initial: model {model.name!r} has no parameter {k!r}")
+    if model.builtin:  # its initial-data parameters are declared: the others change B
+        for k in initial:
+            if k not in model.initial:
+                known = ", ".join(model.initial) or "none"
+                raise SweepError(
+                    f"initial: {k} of the built-in model {model.name!r} changes the model, not "
+                    f"only the initial state (its initial-data parameters: {known})"
+                )
     initial_all = tuple(dict.fromkeys([*model.initial, *initial]))
     own_seed = _has_seed(model)
 

@@ -100,13 +100,49 @@ def build_task(spec: SweepSpec, task: Task) -> tuple[Any, Array, Any, dict[str, 
     problem = None
     states = []
     made: dict[str, tuple[Any, Any]] = {}
+    seen: dict[str, Any] = {}
     for m in task.members:
         p, y0 = build_member(spec, m, made)
-        problem = p if problem is None else problem
+        if problem is None:
+            problem, first = p, m
+        elif p is not problem:  # other parameters: they must not change the model
+            _check_same_model(first, problem, states[0], m, p, y0, seen)
         states.append(y0)
     run = spec.run
     kwargs = {k: run[k] for k in ("t0", "dt", "n_steps", "save_every")}
     return with_member_ids(problem, list(task.members)), np.stack(states), _method(spec), kwargs
+
+
+def _check_same_model(
+    first: Member, problem: Any, y_first: Array, m: Member, p: Any, y0: Array,
+    seen: dict[str, Any],
+) -> None:  # fmt: skip
+    """Raise unless member ``m``'s problem ``p`` is the task's (its first member's): the
+    same state shape, and the same ``B``, Hamiltonian and diagnostics at the fingerprint's
+    probe state (``seen`` keeps the first member's fingerprint). A parameter declared initial
+    data (the sweep's ``initial``) that changes the model would otherwise run the member with
+    the first member's ``B``.
+
+    Raises
+    ------
+    SweepError
+    """
+    from .._fingerprint import fingerprint_changes, model_fingerprint
+
+    differ = sorted(k for k in {*first.params, *m.params} if first.params.get(k) != m.params.get(k))
+    names = ", ".join(differ) or "their parameters"
+    if np.shape(y0) != np.shape(y_first):
+        changes = [f"the state shape {np.shape(y0)} is not {np.shape(y_first)}"]
+    else:
+        if "first" not in seen:  # the task's own, once
+            seen["first"] = model_fingerprint(problem, y_first[None])
+        changes = fingerprint_changes(seen["first"], model_fingerprint(p, y_first[None]))
+    if changes:
+        raise SweepError(
+            f"members {first.index} and {m.index} share a task but {names} change the model "
+            f"({changes[0]}): only parameters that set the initial state alone may be listed "
+            "in initial"
+        )
 
 
 def member_run(spec: SweepSpec, i: int, **solve_kwargs: Any) -> Solution:
