@@ -172,6 +172,15 @@ def test_xarray_and_netcdf_export(tmp_path: Path) -> None:
     assert np.array_equal(back["y_real"].values, ds["y_real"].values)
     assert json.loads(back.attrs["config"])["model"] == "brockett"
     back.close()
+    with pytest.raises(iso.ResultFileError, match="is the result file being exported"):
+        io.to_netcdf(path, path)  # replaced the result file by its export
+    with pytest.raises(iso.ResultFileError, match=r"b.nc exists \(use --force / force=True"):
+        io.to_netcdf(path, tmp_path / "b.nc")
+    assert io.to_netcdf(path, tmp_path / "b.nc", force=True) == tmp_path / "b.nc"
+    assert io.info(path)["complete"] and sorted(p.name for p in tmp_path.iterdir()) == [
+        "b.h5",
+        "b.nc",
+    ]  # no partial file left
 
 
 def test_readers_reject_files_that_are_not_ours(tmp_path: Path) -> None:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._errors import IsoflowError
+from .._errors import IsoflowError, ResultFileError
 from ..diagnostics import Diagnostics, DiagnosticsAccumulator
 from ..problems import IsospectralProblem
 from .reader import RunData, load
@@ -60,11 +60,35 @@ def to_xarray(path: str | os.PathLike[str]) -> Any:
     )
 
 
-def to_netcdf(path: str | os.PathLike[str], out: str | os.PathLike[str]) -> Path:
-    """Export a result file to netCDF-4 (engine ``h5netcdf``); returns the output path."""
+def to_netcdf(
+    path: str | os.PathLike[str], out: str | os.PathLike[str], *, force: bool = False
+) -> Path:
+    """Export a result file to netCDF-4 (engine ``h5netcdf``); returns the output path.
+
+    The file is written beside ``out`` and renamed over it, so a failed export leaves no half
+    file. An existing ``out`` is replaced only with ``force`` (and only a regular file); the
+    result file itself never.
+
+    Raises
+    ------
+    ResultFileError
+        ``out`` is the result file, or exists (without ``force``) or is not a regular file.
+    """
+    from .writer import check_target
+
+    src, dst = Path(path), Path(out)
+    if dst.exists() and src.exists() and os.path.samefile(src, dst):
+        raise ResultFileError(f"{dst} is the result file being exported; choose another name")
+    target = check_target(dst, force=bool(force))
     ds = to_xarray(path)
-    ds.to_netcdf(out, engine="h5netcdf")
-    return Path(out)
+    tmp = target.with_name(f".{target.name}.partial")
+    try:
+        ds.to_netcdf(tmp, engine="h5netcdf")
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return dst
 
 
 def solution_diagnostics(run: RunData, problem: IsospectralProblem) -> Diagnostics:
