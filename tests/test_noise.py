@@ -308,6 +308,16 @@ def test_ensemble_statistics_are_the_members_sample_moments_without_the_failed()
     with pytest.raises(ParameterError, match="at least two members"):
         iso.ensemble.ensemble_statistics(iso.solve(noisy, iso.StochasticIsoMP(), W0, dt=0.05,
                                                    n_steps=2, progress=False))  # fmt: skip
+    # complex states (herm(n)): a complex mean and the variance of |x - mean|^2, no part lost
+    prob, B0 = iso.models.brockett(4)
+    Z0 = np.stack([np.asarray(prob.algebra.project(s * np.asarray(B0))) for s in (0.8, 1.0, 1.3)])
+    ens = iso.solve(prob, iso.IsoMP(), Z0, dt=0.05, n_steps=4, progress=False)
+    est = iso.ensemble.ensemble_statistics(ens)
+    Z = np.moveaxis(ens.ys, 1, 0)  # (members, times, 4, 4)
+    assert est.mean.dtype.kind == "c" and np.abs(est.mean.imag).max() > 0.01
+    assert np.array_equal(est.mean, Z.mean(axis=0))
+    dev = np.abs(Z - Z.mean(axis=0)) ** 2
+    assert np.allclose(est.variance, dev.sum(axis=0) / 2, rtol=1e-13, atol=0)
 
 
 def test_the_registry_builds_the_noisy_models_from_their_parameters() -> None:

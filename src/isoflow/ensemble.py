@@ -90,7 +90,9 @@ def ensemble_statistics(
         opened with :func:`isoflow.sweep.open_sweep` (members that did not finish are left out).
     observable : callable, optional
         ``f(states)`` for states of shape ``(..., *core)``, returning ``(..., *observable)``
-        (e.g. ``problem.hamiltonian``); default: the state itself.
+        (e.g. ``problem.hamiltonian``); default: the state itself. Complex values (the states
+        of ``u(n)``, ``su(n)``, ``herm(n)``) give a complex mean and the variance of
+        :math:`|x - \bar x|^2` (real).
 
     Raises
     ------
@@ -103,7 +105,13 @@ def ensemble_statistics(
         raise ParameterError(
             f"ensemble_statistics needs at least two members that did not fail, got {used.shape[0]}"
         )
-    values = np.asarray(observable(used) if observable is not None else used, dtype=float)
+    values = np.asarray(observable(used) if observable is not None else used)
+    if values.dtype.kind not in "biufc":
+        raise ParameterError(
+            f"ensemble_statistics: the observable gave non-numeric values ({values.dtype})"
+        )
+    if values.dtype.kind != "c":  # complex values (states of u(n), herm(n)) stay complex
+        values = values.astype(np.float64)
     M = values.shape[0]
     mean = values.mean(axis=0)
     var = values.var(axis=0, ddof=1)
