@@ -562,6 +562,14 @@ def test_members_of_different_shapes_are_opened_one_shape_at_a_time(tmp_path: Pa
     assert open_sweep(d, where={"n": 3}).y.shape == (1, 5, 3, 3)
     four = open_sweep(d, where={"n": 4})
     assert np.array_equal(_local(four, "y")[0], member_run(spec, 1).ys)
+    with pytest.raises(SweepError, match=r"where: the sweep's members have no parameter zz \("):
+        open_sweep(d, where={"zz": 7})  # selected no member, silently
+    with pytest.raises(SweepError, match=r"member_run needs a SweepSpec .*got str"):
+        member_run(str(d), 0)  # type: ignore[arg-type]
+    with pytest.raises(SweepError, match=r"member_run: no member 2 \(the sweep has 2\)"):
+        member_run(spec, 2)
+    with pytest.raises(SweepError, match="a sweep takes at least one step, got n_steps = 0"):
+        read_spec({"model": "rigid-body", "dt": 0.1, "n_steps": 0, "members": [{"n": 3}]})
 
 
 def test_a_task_whose_members_all_failed_is_frozen_at_its_last_good_state(tmp_path) -> None:

@@ -252,6 +252,14 @@ def open_sweep(
     members = man["members"]
     ts = saved_times(man["run"])
     errors = man.get("errors", {})
+    if isinstance(where, Mapping):  # a name no member has selects nothing: say so
+        known = {k for m in members for k in m["params"]} | {"seed"}
+        unknown = sorted(set(where) - known)
+        if unknown:
+            raise SweepError(
+                f"where: the sweep's members have no parameter {', '.join(unknown)} (they "
+                f"have {', '.join(sorted(known))})"
+            )
     picked: list[tuple[_TaskState, list[int]]] = []
     order: list[int] = []
     rows: list[dict[str, Any]] = []

@@ -456,6 +456,8 @@ def _build(table: dict[str, Any]) -> SweepSpec:
         except (IsoflowError, ValueError, TypeError) as exc:
             raise SweepError(f"{what}: {' '.join(str(exc).split())}") from None
         dt, n = time_grid(cfg["t0"], cfg.get("t1"), cfg.get("dt"), cfg.get("n_steps"))
+        if n < 1:  # a run of no step (its readers want at least one)
+            raise SweepError(f"{what}: a sweep takes at least one step, got n_steps = {n}")
         if grid_of is None:
             grid_of = (dt, n)
             run = {k: cfg[k] for k in ("method", "solver", "rtol", "anderson") if k in cfg}

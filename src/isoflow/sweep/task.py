@@ -149,7 +149,23 @@ def member_run(spec: SweepSpec, i: int, **solve_kwargs: Any) -> Solution:
     """Member ``i`` of the sweep as its own serial run (in memory, ``throw=False``).
 
     A sweep's stored states of the member equal this run's saved states bit for bit.
+
+    Raises
+    ------
+    SweepError
+        ``spec`` is not a :class:`~isoflow.sweep.SweepSpec` (read one with
+        :func:`~isoflow.sweep.read_spec`), or ``i`` is not one of its members.
     """
+    if not isinstance(spec, SweepSpec):
+        raise SweepError(
+            f"member_run needs a SweepSpec (iso.sweep.read_spec(...)), got {type(spec).__name__}"
+        )
+    if (
+        isinstance(i, bool)
+        or not isinstance(i, (int, np.integer))
+        or not 0 <= i < len(spec.members)
+    ):
+        raise SweepError(f"member_run: no member {i!r} (the sweep has {len(spec.members)})")
     problem, y0 = build_member(spec, spec.members[i])
     problem = with_member_ids(problem, [spec.members[i]])
     run = spec.run
