@@ -73,6 +73,15 @@ def test_plot_draws_the_budgets_spectra_and_zonal_wind(tmp_path: Path) -> None:
     axes = {ax.get_title(): ax for ax in fig.axes}
     assert {"energy budget", "enstrophy budget", "energy spectrum", "zonal-mean wind"} <= set(axes)
     assert "energy transfer (sums to 0)" in axes
+    params = {f"p{k}": 0.001 * k for k in range(20)}
+    meta = {"method": "Strang(IsoMP)", "dt": 0.01}
+    config = {"model": "euler-sphere", "params": params}
+    long = type("Run", (), {"complete": True, "meta": meta, "config": config})
+    title = plotting._title(long).replace("\u00a0", " ")  # wraps instead of leaving the figure
+    assert title.startswith("euler-sphere (p0 = 0.0, ") and title.endswith("dt = 0.01")
+    lines = title.splitlines()
+    assert len(lines) > 1 and max(map(len, lines)) <= 110
+    assert all(not ln.startswith("=") and not ln.endswith("=") for ln in lines)  # "k = v" kept
     # the budget panel draws injection, dissipation, their difference and dE/dt of the file
     labels = [line.get_label() for line in axes["energy budget"].get_lines()]
     assert labels == ["injection", "dissipation", "injection - dissipation", "dE/dt (saved E)"]

@@ -9,6 +9,7 @@ without replacing an existing file unless told to.
 
 from __future__ import annotations
 
+import textwrap
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -35,7 +36,10 @@ def _title(run: Any) -> str:
     params = ", ".join(f"{k} = {v}" for k, v in (cfg.get("params") or {}).items())
     title = f"{cfg.get('model', 'run')}" + (f" ({params})" if params else "")
     title += f": {meta.get('method')}, dt = {meta.get('dt'):g}"
-    return title + ("" if run.complete else " (incomplete)")
+    title += "" if run.complete else " (incomplete)"
+    # long parameter lists wrap between parameters (no-break spaces keep "k = v" together),
+    # instead of running off both edges of the figure
+    return textwrap.fill(title.replace(" = ", "\u00a0=\u00a0"), width=110)
 
 
 def _component(run: Any, idx: tuple[int, ...]) -> str:
