@@ -407,16 +407,16 @@ def half_step(problem: IsospectralProblem, tau: float) -> HalfStep:
             s = G.sum(axis=0)
             steady = s if steady is None else steady + s
     noise = []
+    from scipy import sparse
+
     for _, modes, sigma in sto:
         assert lin is not None
         scale = sigma * ou_scales(lin.rates[modes], tau)
         E = lin.mode_patterns(modes)  # sparse: a band of harmonics is two diagonals each
-        E.data *= np.repeat(scale, np.diff(E.indptr))  # row j times its deviation
-        noise.append(E)
+        noise.append(sparse.csr_array(sparse.diags_array(scale) @ E))  # row j times its scale
     if noise:
-        from scipy import sparse
-
         stacked = sparse.csr_array(sparse.vstack(noise, format="csr"))
+        stacked.sort_indices()
     return HalfStep(
         steady,
         np.concatenate(responses) if responses else None,
