@@ -272,6 +272,33 @@ def check_truncation(k: Any) -> float | None:
     return None if k is None else _truncation(k)
 
 
+def _in_normalizer(F: Array, algebra: Algebra, what: str) -> Array:
+    """The fields ``F`` (``(m, *normalizer.shape)``) in the normalizer's dtype, if each is in
+    the normalizer of ``algebra`` (``what`` names field ``i`` in the message).
+
+    Raises
+    ------
+    InvalidBError
+        Complex fields on a real space, or a field away from the normalizer.
+    """
+    norm = algebra.normalizer
+    if F.dtype.kind == "c" and not norm.is_complex:
+        raise InvalidBError(
+            f"TransportNoise: complex fields cannot act on the real space {algebra.name}"
+        )
+    Fc = F.astype(norm.dtype)
+    dist = np.atleast_1d(norm.distance(Fc))
+    scale = np.atleast_1d(norm.norm(Fc))
+    bad = np.flatnonzero(dist > 1e-12 + 1e-10 * scale)
+    if bad.size:
+        raise InvalidBError(
+            f"TransportNoise: {what.format(int(bad[0]))} is not in the normalizer {norm.name} "
+            f"of {algebra.name} (distance {float(dist[bad[0]]):.2e}): the flow would leave "
+            "the space"
+        )
+    return Fc
+
+
 @dataclass(frozen=True, eq=False)
 class TransportNoise:
     r"""Stratonovich transport noise :math:`\sum_i [B_i(W), W] \circ d\beta_i` of a problem.
@@ -362,20 +389,7 @@ class TransportNoise:
                     f"TransportNoise: fields must have shape (m, {', '.join(map(str, norm.shape))})"
                     f" for {algebra.name}, got {F.shape}"
                 )
-            if F.dtype.kind == "c" and not norm.is_complex:
-                raise InvalidBError(
-                    f"TransportNoise: complex fields cannot act on the real space {algebra.name}"
-                )
-            Fc = F.astype(norm.dtype)
-            dist = np.atleast_1d(norm.distance(Fc))
-            scale = np.atleast_1d(norm.norm(Fc))
-            bad = np.flatnonzero(dist > 1e-12 + 1e-10 * scale)
-            if bad.size:
-                raise InvalidBError(
-                    f"TransportNoise: field {int(bad[0])} is not in the normalizer {norm.name} of "
-                    f"{algebra.name} (distance {float(dist[bad[0]]):.2e}): the flow would leave "
-                    "the space"
-                )
+            Fc = _in_normalizer(F, algebra, "field {}")
             object.__setattr__(self, "fields", np.ascontiguousarray(Fc))
             self.fields.setflags(write=False)
         if self.site is not None:
@@ -417,20 +431,7 @@ class TransportNoise:
             )
         if not np.all(np.isfinite(F)):
             raise InvalidBError("TransportNoise: the fields function returned non-finite values")
-        if F.dtype.kind == "c" and not norm.is_complex:
-            raise InvalidBError(
-                f"TransportNoise: complex fields cannot act on the real space {algebra.name}"
-            )
-        Fc = F.astype(norm.dtype).reshape(-1, *norm.shape)
-        dist = np.atleast_1d(norm.distance(Fc))
-        scale = np.atleast_1d(norm.norm(Fc))
-        bad = np.flatnonzero(dist > 1e-12 + 1e-8 * scale)
-        if bad.size:
-            raise InvalidBError(
-                f"TransportNoise: a field of the fields function is not in the normalizer "
-                f"{norm.name} of {algebra.name} (distance {float(dist[bad[0]]):.2e}): the flow "
-                "would leave the space"
-            )
+        _in_normalizer(F.reshape(-1, *norm.shape), algebra, "field {} of the fields function")
 
     def particles(self, algebra: Algebra) -> int:
         """Particles with site noise (``0`` without)."""
