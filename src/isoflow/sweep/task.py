@@ -101,12 +101,14 @@ def build_task(spec: SweepSpec, task: Task) -> tuple[Any, Array, Any, dict[str, 
     states = []
     made: dict[str, tuple[Any, Any]] = {}
     seen: dict[str, Any] = {}
+    # the sweep's own initial-data names (the model's are declared by the model and trusted)
+    declared = set(spec.initial) - set(spec.model_spec().initial)
     for m in task.members:
         p, y0 = build_member(spec, m, made)
         if problem is None:
             problem, first = p, m
-        elif p is not problem:  # other parameters: they must not change the model
-            _check_same_model(first, problem, states[0], m, p, y0, seen)
+        elif p is not problem and any(first.params.get(k) != m.params.get(k) for k in declared):
+            _check_same_model(first, problem, states[0], m, p, y0, seen)  # must not change B
         states.append(y0)
     run = spec.run
     kwargs = {k: run[k] for k in ("t0", "dt", "n_steps", "save_every")}
