@@ -147,3 +147,58 @@ def test_thermal_lattice_matches_metropolis_monte_carlo(temperature: float) -> N
     for llg, mc in ((_lattice_energy(Y), E_mc[300:]), (Y[..., 2].mean(axis=(-1, -2)), M_mc[300:])):
         (a, sa), (b, sb) = _batch_mean(llg), _batch_mean(mc)
         assert abs(a - b) < 4 * math.hypot(sa, sb), (a, sa, b, sb)
+
+
+def test_damped_and_noisy_models_report_the_total_spin_as_an_observable() -> None:
+    """What damping or noise moves is saved as an observable (no drift), what they keep stays
+    an invariant; the diagnostics and the summary say the energy changes by design."""
+    from isoflow.cli._common import summary_lines
+
+    damped, w0 = iso.models.heisenberg_chain(12, damping=0.3)
+    assert not damped.invariants and set(damped.observables) == {"momentum"}
+    assert damped.lyapunov is not None and damped.energy_changes
+    sol = iso.solve(damped, iso.IsoMP(), w0, dt=0.05, n_steps=200, save_every=10,
+                    progress=False)  # fmt: skip
+    d = sol.diagnostics
+    assert float(np.max(d.lyapunov_max_decrease)) <= 1e-13 * abs(float(d.hamiltonian[0]))
+    S = d.observables["momentum"]
+    assert float(np.abs(S - S[0]).max()) > 1e-2  # the damping moves it
+    text = "\n".join(summary_lines("run", sol))
+    assert "noise or damping: the energy may change by design" in text
+    assert "momentum_drift" not in str(d.summary())
+
+    thermal, _ = iso.models.heisenberg_chain(12, temperature=0.5, damping=0.3, noise_seed=1)
+    assert thermal.lyapunov is None and set(thermal.observables) == {"momentum"}
+    ideal, _ = iso.models.heisenberg_chain(12)
+    assert set(ideal.invariants) == {"momentum"} and not ideal.energy_changes
+    sol = iso.solve(ideal, iso.IsoMP(), w0, dt=0.05, n_steps=20, progress=False)
+    assert "note" not in "\n".join(summary_lines("run", sol))
+
+
+def test_transport_noise_moves_the_momentum_of_vortices_and_of_euler_on_the_sphere() -> None:
+    """The vortices' default noise turns the configuration: M turns (an observable) and |M|
+    changes only by the scheme's error; on the sphere the noise keeps the enstrophy (a
+    Casimir, still an invariant) and moves the angular momentum (an observable). Seed 3."""
+    x = np.array([[1.0, 0, 0], [0, 0.6, 0.8], [0, 0, 1.0], [0.6, -0.8, 0]])
+    prob, x0 = iso.models.sphere_vortices(
+        positions=x, circulations=[1.0, 0.7, -0.5, 0.3], noise=0.5, noise_seed=3
+    )
+    assert not prob.invariants and set(prob.observables) == {"momentum"}
+    sol = iso.solve(prob, iso.StochasticIsoMP(), x0, dt=0.05, n_steps=200, save_every=10,
+                    progress=False)  # fmt: skip
+    M = sol.diagnostics.observables["momentum"]
+    size = np.linalg.norm(M, axis=-1)
+    turned = float(np.abs(M - M[0]).max())
+    assert turned > 1e-1 * size[0]
+    # |M| is no Casimir: the scheme keeps it to its accuracy only, while M turns
+    assert float(np.abs(size - size[0]).max()) < 1e-2 * turned
+    euler, Q0 = iso.models.euler_sphere(N=8, noise=0.1, noise_seed=3)
+    assert set(euler.invariants) == {"enstrophy"}
+    assert set(euler.observables) == {"angular_momentum"}
+    rotating, _ = iso.models.euler_sphere(N=8, omega=1.0, noise=0.1, noise_seed=3)
+    assert set(rotating.invariants) == {"enstrophy"}
+    sol = iso.solve(euler, iso.StochasticIsoMP(), Q0, dt=0.05, n_steps=50, save_every=10,
+                    progress=False)  # fmt: skip
+    assert float(np.max(sol.diagnostics.invariant_drift["enstrophy"])) <= 1e-12
+    L = sol.diagnostics.observables["angular_momentum"]
+    assert float(np.abs(L - L[0]).max()) > 1e-6

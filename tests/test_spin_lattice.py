@@ -72,10 +72,49 @@ def test_invariants(method: iso.Method) -> None:
 
 def test_field_and_anisotropy_keep_only_Sz() -> None:
     prob, w0 = iso.models.spin_lattice((5, 5), anisotropy=0.8, field=(0, 0, 0.7), seed=4)
+    assert set(prob.invariants) == {"total_spin_z"} and set(prob.observables) == {"total_spin"}
     sol = iso.solve(prob, iso.IsoMP(), w0, dt=0.05, n_steps=400, save_every=10)
-    S = sol.diagnostics.invariants["total_spin"]
+    S = sol.diagnostics.observables["total_spin"]
     assert np.max(np.abs(S[:, 2] - S[0, 2])) <= 1e-12  # S_z conserved
     assert np.max(np.abs(S[:, :2] - S[0, :2])) > 1e-3  # S_x, S_y precess
+    assert float(np.max(sol.diagnostics.invariant_drift["total_spin_z"])) <= 1e-12
+    assert np.array_equal(sol.diagnostics.invariants["total_spin_z"], S[:, 2])
+
+
+def test_isotropic_coupling_in_a_field_keeps_S_along_the_field() -> None:
+    """Delta = 0, h oblique: dS/dt = -S x h turns S about h, keeping S . h (to rounding) and
+    moving its other components."""
+    h = np.array([0.6, -0.3, 0.5])
+    prob, w0 = iso.models.spin_lattice((4, 5), field=h, seed=5)
+    assert set(prob.invariants) == {"total_spin_along_field"}
+    assert not prob.energy_changes
+    sol = iso.solve(prob, iso.IsoMP(), w0, dt=0.05, n_steps=400, save_every=10)
+    d = sol.diagnostics
+    S = d.observables["total_spin"]
+    assert float(np.max(d.invariant_drift["total_spin_along_field"])) <= 1e-12
+    assert np.allclose(d.invariants["total_spin_along_field"], S @ h / np.linalg.norm(h),
+                       rtol=0, atol=1e-13)  # fmt: skip
+    across = S - np.outer(S @ h, h) / (h @ h)
+    assert np.max(np.abs(across - across[0])) > 1e-2  # the rest precesses
+    # and an anisotropy with an oblique field keeps no part of S
+    prob, _ = iso.models.spin_lattice((4, 5), field=h, anisotropy=0.4, seed=5)
+    assert not prob.invariants and set(prob.observables) == {"total_spin"}
+
+
+def test_damping_lowers_the_energy_and_keeps_the_lengths() -> None:
+    """Gilbert damping at T = 0: H is a Lyapunov function (never rises, checked step by saved
+    step), the |w_i| stay at rounding, the total spin is an observable, and the diagnostics
+    say the energy changes by design."""
+    prob, w0 = iso.models.spin_lattice((4, 4), J=-1.0, field=(0, 0, 0.3), damping=0.2, seed=3)
+    assert prob.energy_changes and not prob.forced_or_dissipative
+    assert not prob.invariants and set(prob.observables) == {"total_spin"}
+    sol = iso.solve(prob, iso.IsoMP(), w0, dt=0.05, n_steps=400, save_every=5)
+    d = sol.diagnostics
+    assert d.energy_changes
+    H = np.asarray(d.hamiltonian)
+    assert H[-1] < H[0] - 1.0  # the damping removes energy
+    assert float(np.max(d.lyapunov_max_decrease)) <= 1e-12 * abs(H[0])
+    assert float(np.max(d.casimir_drift)) <= 1e-12
 
 
 def test_ensemble_and_bad_parameters() -> None:

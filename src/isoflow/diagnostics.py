@@ -56,6 +56,10 @@ class Diagnostics:
     forced_or_dissipative : bool
         The problem's linear part or forcing changes the Casimirs and the energy by design
         (their "drifts" are then changes, not errors).
+    energy_changes : bool
+        The flow may change the energy and the invariants other than the Casimirs by design
+        (:attr:`isoflow.IsospectralProblem.energy_changes`: forcing, noise, or a dissipation in
+        ``B``); their "drifts" are then changes.
     """
 
     ts: Array
@@ -72,6 +76,7 @@ class Diagnostics:
     invariant_drift: dict[str, Array] = field(default_factory=dict)
     observables: dict[str, Array] = field(default_factory=dict)
     forced_or_dissipative: bool = False
+    energy_changes: bool = False
 
     def summary(self) -> dict[str, float]:
         """Worst case over the ensemble of every drift, as plain floats (JSON-ready)."""
@@ -296,6 +301,7 @@ class DiagnosticsAccumulator:
             invariant_drift={n: d[f"{n}_drift"] for n in names},
             observables={n: full[f"observables/{n}"] for n in observed},
             forced_or_dissipative=self.problem.forced_or_dissipative,
+            energy_changes=self.problem.energy_changes,
             **kw,
         )
 

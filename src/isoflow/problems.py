@@ -182,6 +182,14 @@ class IsospectralProblem:
         """Whether a linear part or a forcing changes the Casimirs and the energy by design."""
         return self.linear_part is not None or bool(self.forcing)
 
+    @property
+    def energy_changes(self) -> bool:
+        """Whether the flow may change the energy (and the invariants other than the Casimirs)
+        by design: a linear part or a forcing, transport noise, or a dissipation in ``B``,
+        which a problem declares by its ``lyapunov`` function (a double bracket, Gilbert
+        damping). The drifts of such quantities are then changes, not errors."""
+        return self.forced_or_dissipative or self.noise is not None or self.lyapunov is not None
+
     # ---- evaluation ---------------------------------------------------------------------
     def evaluate_B(self, W: Array) -> Array:
         """``B(W)`` honouring :attr:`vectorized`, checked on every call.

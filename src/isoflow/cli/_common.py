@@ -159,8 +159,12 @@ def summary_lines(title: str, sol: Any, path: str | None = None) -> list[str]:
         *((k, f"{v:.3e}") for k, v in d.items()),
         ("status", sol.message),
     ]
+    note = None
     if sol.diagnostics is not None and sol.diagnostics.forced_or_dissipative:
         note = "forced or dissipative: Casimirs and energy change by design (drifts are changes)"
+    elif sol.diagnostics is not None and sol.diagnostics.energy_changes:
+        note = "noise or damping: the energy may change by design (its drift is a change)"
+    if note is not None:
         rows.insert(len(rows) - len(d) - 1, ("note", note))  # just before the drifts
     if path is not None:
         rows.append(("file", path))

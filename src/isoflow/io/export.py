@@ -112,4 +112,5 @@ def solution_diagnostics(run: RunData, problem: IsospectralProblem) -> Diagnosti
         invariant_drift=d.invariant_drift,
         observables={k: run.series[f"observables/{k}"] for k in d.observables},
         forced_or_dissipative=d.forced_or_dissipative,
+        energy_changes=d.energy_changes,
     )

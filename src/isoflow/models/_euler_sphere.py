@@ -220,7 +220,8 @@ def euler_sphere(
         forcing these are ``observables`` instead (saved and drawn, no drift), with the
         spectra, the transfer and the budgets (:mod:`isoflow.models._forced`; with the
         double bracket alone the enstrophy stays an invariant, and the momentum and the
-        spectra are observables); and
+        spectra are observables; with ``noise`` the momentum is an observable, which the
+        noise changes); and
         ``parameters``: ``N, omega, hbar, seed, initial`` (``"random"``, ``"coefficients"``,
         ``"function"`` or ``"matrix"``) and, for random data, ``lmin, lmax, slope, rms``.
     Q0 : ndarray, shape (*batch, N, N)
@@ -380,6 +381,10 @@ def euler_sphere(
     transport = transport_noise("euler_sphere", noise, noise_seed, lambda: large_scale_noise(N))
     if transport is not None:
         parameters["noise"] = transport.parameters()
+        # transport noise keeps the Casimirs (the enstrophy), not the angular momentum
+        moved = {k: v for k, v in invariants.items() if k != "enstrophy"}
+        observables.update(moved)
+        invariants = {k: v for k, v in invariants.items() if k not in moved}
     problem = IsospectralProblem(
         algebra=alg,
         kernel=kernel,

@@ -81,7 +81,9 @@ def heisenberg_chain(
 
     Conserved: :math:`|w_i|` (Casimirs), ``H``, and the total spin
     :math:`\sum_i w_i` (tracked as the invariant ``"momentum"``; linear, so conserved by
-    IsoMP, the spherical and the classical midpoint up to rounding).
+    IsoMP, the spherical and the classical midpoint up to rounding). With damping or a
+    temperature only the :math:`|w_i|` are: ``"momentum"`` is then an observable, and with
+    damping at ``T = 0`` the problem's ``lyapunov`` is :math:`-H`, which the damping raises.
 
     Parameters
     ----------
@@ -168,7 +170,10 @@ def heisenberg_chain(
         noise=noise,
         hamiltonian=hamiltonian,
         B_jvp=None if lam > 0 else B_jvp,
-        invariants={"momentum": total_spin},
+        lyapunov=(lambda W: -hamiltonian(W)) if lam > 0 and noise is None else None,
+        # damping and noise move the total spin: saved, no drift
+        invariants={} if lam > 0 or noise is not None else {"momentum": total_spin},
+        observables={"momentum": total_spin} if lam > 0 or noise is not None else {},
         name=f"Heisenberg spin chain (N = {N})",
         parameters=parameters,
     )

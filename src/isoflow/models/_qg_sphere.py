@@ -218,7 +218,10 @@ def qg_sphere(
         (saved and drawn, no drift): ``"zonal_wind"`` (on :data:`ZONAL_LATITUDES`
         colatitudes, see :func:`zonal_wind`), the kinetic ``"energy_spectrum"``,
         ``"enstrophy_spectrum"``, ``"energy_transfer"`` and, with dissipation or forcing, the
-        budgets (:mod:`isoflow.models._forced`).
+        budgets (:mod:`isoflow.models._forced`). In the Euler limit (``F = kappa = 0``) the
+        problem is :func:`~isoflow.models.euler_sphere`'s with ``"zonal_wind"`` added: its
+        invariants (the enstrophy and the angular momentum) and observables (the spectra and
+        the transfer only with dissipation or forcing) are Euler's.
     Q0 : ndarray, shape (*batch, N, N)
 
     Raises

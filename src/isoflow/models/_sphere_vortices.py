@@ -88,7 +88,8 @@ def sphere_vortices(
     -------
     problem : IsospectralProblem
         On ``so3_vectors(N)``, with ``hamiltonian``, exact ``B_jvp`` and the invariant
-        ``"momentum"`` (shape ``(*batch, 3)``); ``parameters``: ``circulations``,
+        ``"momentum"`` (shape ``(*batch, 3)``; an observable with ``noise``, which turns it);
+        ``parameters``: ``circulations``,
         ``positions``.
     x0 : ndarray, shape (*batch, N, 3)
 
@@ -172,7 +173,9 @@ def sphere_vortices(
         noise=transport,
         hamiltonian=hamiltonian,
         B_jvp=B_jvp,
-        invariants={"momentum": momentum},
+        # transport noise moves M (the default fields turn it; the exact flow keeps |M|)
+        invariants={"momentum": momentum} if transport is None else {},
+        observables={} if transport is None else {"momentum": momentum},
         name=f"point vortices on the sphere (N = {N})",
         kernel=PairwiseVortex(G, "sphere"),  # the same B, for the compiled fast paths
         parameters=parameters,

@@ -5,6 +5,7 @@ The equations and what they conserve: the Notes of :func:`isoflow.models.spin_la
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numba
@@ -114,8 +115,13 @@ def spin_lattice(
     Returns
     -------
     problem : IsospectralProblem
-        On ``so3_vectors(N)`` with the compiled field (``iso.CompiledB``), ``hamiltonian`` and
-        the invariant ``"total_spin"`` (``(*batch, 3)``).
+        On ``so3_vectors(N)`` with the compiled field (``iso.CompiledB``) and ``hamiltonian``.
+        The total spin (``(*batch, 3)``) is the invariant ``"total_spin"`` where the flow
+        conserves it (:math:`\Delta = 0`, ``h = 0``, no damping or temperature), else the
+        observable ``"total_spin"``, with the invariant ``"total_spin_along_field"``
+        (:math:`S \cdot h / |h|`, :math:`\Delta = 0`) or ``"total_spin_z"`` (a field along
+        ``z`` or none) where that part is conserved. With damping at ``T = 0`` the energy
+        decreases: ``lyapunov`` is :math:`-H`.
     w0 : ndarray, shape (*batch, N, 3)
 
     Raises
@@ -149,9 +155,12 @@ def spin_lattice(
     isotropic Heisenberg model.
 
     Conserved: every :math:`|w_i|` (Casimirs), ``H``, and the total spin :math:`S = \sum_i w_i`
-    when :math:`\Delta = 0` and :math:`h = 0` (only :math:`S_z` when the field and the anisotropy
-    are along ``z``): :math:`\dot S = \sum_i w_i \times (J \sum_{j\sim i} D w_j - h)`, whose pair
-    terms cancel for :math:`D = I` and whose field term is :math:`S \times h`.
+    when :math:`\Delta = 0` and :math:`h = 0`: :math:`\dot S = \sum_i w_i \times (J \sum_{j\sim
+    i} D w_j - h)`, whose pair terms cancel for :math:`D = I` (and their :math:`z` components
+    for the anisotropy along ``z``) and whose field term is :math:`-S \times h`. So
+    :math:`S \cdot h` is conserved when :math:`\Delta = 0`, and :math:`S_z` when the field is
+    along ``z`` (or zero). Gilbert damping lowers ``H``; damping and noise conserve no part of
+    :math:`S`.
 
     Examples
     --------
@@ -201,6 +210,7 @@ def spin_lattice(
         return np.sum(W, axis=-2)
 
     T, lam, noise = thermal_noise("spin_lattice", temperature, damping, noise_seed)
+    invariants, observables = _total_spin_diagnostics(total_spin, delta, h, lam > 0 or T > 0)
     if lam > 0:
         kernel = CompiledB(
             spin_lattice_llg_field, (L1, L2, J, J * (1.0 + delta), h, lam), name="spin_lattice_llg"
@@ -214,7 +224,9 @@ def spin_lattice(
         kernel=kernel,
         noise=noise,
         hamiltonian=hamiltonian,
-        invariants={"total_spin": total_spin},
+        lyapunov=(lambda W: -hamiltonian(W)) if lam > 0 and T == 0 else None,
+        invariants=invariants,
+        observables=observables,
         name=f"spin lattice {L1}x{L2} (J = {J:g}, anisotropy = {delta:g})",
         parameters={
             "shape": (L1, L2),
@@ -228,3 +240,34 @@ def spin_lattice(
         },
     )
     return problem, w_init
+
+
+def _total_spin_diagnostics(
+    total_spin: Callable[[Array], Array], delta: float, h: Array, stochastic_or_damped: bool
+) -> tuple[dict[str, Callable[[Array], Array]], dict[str, Callable[[Array], Array]]]:
+    r"""``(invariants, observables)`` of the total spin :math:`S = \sum_i w_i`: what of it the
+    flow conserves is an invariant, the rest an observable (saved, no drift).
+
+    :math:`\dot S = -S \times h` plus pair terms that cancel for an isotropic coupling, and
+    whose :math:`z` components cancel for the anisotropy along :math:`z`: all of :math:`S` is
+    conserved for :math:`\Delta = 0, h = 0`; :math:`S \cdot h` for :math:`\Delta = 0`;
+    :math:`S_z` for a field along :math:`z` (or none). Damping and noise conserve none.
+    """
+    if stochastic_or_damped:
+        return {}, {"total_spin": total_spin}
+    if delta == 0.0 and not np.any(h):
+        return {"total_spin": total_spin}, {}
+    if delta == 0.0:
+        unit = h / np.linalg.norm(h)
+
+        def along_field(W: Array) -> Array:
+            return total_spin(W) @ unit
+
+        return {"total_spin_along_field": along_field}, {"total_spin": total_spin}
+    if h[0] == 0.0 and h[1] == 0.0:
+
+        def z_component(W: Array) -> Array:
+            return total_spin(W)[..., 2]
+
+        return {"total_spin_z": z_component}, {"total_spin": total_spin}
+    return {}, {"total_spin": total_spin}
