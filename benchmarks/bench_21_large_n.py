@@ -213,8 +213,8 @@ def _iteration_alone(prob: Any, W0: Any, h: float) -> dict[str, float]:
 
     r = compiled_runner(prob, iso.IsoMP(), W0, h)
     W = np.ascontiguousarray(np.asarray(W0, dtype=r.W.dtype).reshape(-1))
-    X, G, aux = W.copy(), np.empty_like(W), np.empty_like(W)
-    work = np.empty((r.impl.nwork, W.size), dtype=W.dtype)
+    X, G, aux = W.copy(), np.zeros_like(W), np.zeros_like(W)  # not garbage: no subnormals
+    work = np.zeros((r.impl.nwork, W.size), dtype=W.dtype)
     sd, rr = np.zeros((1, 0)), np.zeros(1)
     lay = r.layout.record
 

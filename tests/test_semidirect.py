@@ -61,6 +61,12 @@ def test_coordinates_and_projection(key: str) -> None:
     P = alg.project(Y)
     assert float(np.max(alg.distance(P))) <= 1e-15
     assert np.array_equal(P[..., 1, :, :], base.project(Y[..., 1, :, :]))
+    # split gives views of the two fields (as documented): writing one writes the pair
+    th, w = alg.split(X)
+    assert np.array_equal(th, X[..., 0, :, :]) and np.array_equal(w, X[..., 1, :, :])
+    assert np.shares_memory(th, X) and np.shares_memory(w, X)
+    w[...] = 0
+    assert not np.any(X[..., 1, :, :]) and np.any(X[..., 0, :, :])
 
 
 def test_from_hamiltonian_gives_the_semidirect_lie_poisson_equations() -> None:

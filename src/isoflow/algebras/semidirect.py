@@ -130,8 +130,8 @@ class _Pairs:
                 f"pairs of {self.name} have shape (*batch, {', '.join(map(str, self.shape))}), "
                 f"got {Ya.shape}"
             )
-        axis = Ya.ndim - k - 1
-        return np.take(Ya, 0, axis=axis), np.take(Ya, 1, axis=axis)
+        core = (slice(None),) * k
+        return Ya[(..., 0, *core)], Ya[(..., 1, *core)]
 
     def dagger(self, G: Array) -> Array:
         r"""The map from gradients to ``B``: the fields swapped, each daggered.
