@@ -4,8 +4,11 @@ Rigid body on so(10): IsoMP against RK4
 
 The generalized rigid body ``dW/dt = -[I^{-1} W, W]`` on so(10) with the paper's inertia
 (symmetrized, see :doc:`/theory/method`). IsoMP keeps the spectrum of ``W`` (the Casimirs)
-to rounding and the energy within a bounded ``O(h^2)`` band; RK4 at the same step lets both
-drift.
+to rounding and the energy within a bounded ``O(h^2)`` band. RK4 at the same step lets the
+spectrum drift, steadily: the flow leaves the coadjoint orbit. Its energy error is smaller
+here (fourth order against second, at ``h = 0.1``, 2.5e-10 against 7.6e-6 at ``T = 100``),
+and grows with time (4.4e-8 at ``T = 10^4``) where IsoMP's stays in its band; the
+structure, not the order, is what IsoMP buys.
 """
 
 import os
