@@ -123,3 +123,17 @@ def test_a_field_declared_not_to_raise_ends_the_run_with_its_exception() -> None
 def test_compiled_b_raises_must_be_a_bool(value: Any) -> None:
     with pytest.raises(TypeError, match="raises must be True or False"):
         iso.CompiledB(user_kernels.raises_when_large, (C, 1.0), raises=value)
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["NumPy", "compiled"])
+def test_a_member_whose_b_raises_at_its_initial_state_is_refused_by_name(compiled: bool) -> None:
+    """The initial state is the input: the solve refuses it with a one-line InvalidBError that
+    names the member and B's exception (not a broadcasting diagnosis), even with throw=False."""
+    Y = _members()
+    limit = 0.5 * float(np.abs(Y[BAD]).max())
+    assert np.delete(np.abs(Y), BAD, axis=0).max() < limit  # only member BAD is over it
+    with pytest.raises(iso.InvalidBError) as info:
+        _solve(Y, limit, compiled, throw=False)
+    message = str(info.value)
+    assert f"at the initial state of member {BAD}" in message and "\n" not in message
+    assert "last two axes" not in message

@@ -292,7 +292,8 @@ class IsospectralProblem:
         ------
         InvalidBError
             ``B`` works on one state but fails or gives other values on the ensemble: it
-            does not broadcast over leading axes (``W.T`` reverses *all* axes of a stack).
+            does not broadcast over leading axes (``W.T`` reverses *all* axes of a stack);
+            or it raises for one member's state alone (that member named).
         """
         alg = self.algebra
         if not self.vectorized or not alg.batch_shape(W):
@@ -310,6 +311,14 @@ class IsospectralProblem:
                 return
             what = "gives other values for its first member than for that state alone"
         else:
+            for j, member in enumerate(W.reshape(-1, *alg.shape)):
+                try:
+                    self.evaluate_B(member)
+                except Exception as exc:  # that member's own state: bad input, named
+                    raise InvalidBError(
+                        f"B raised {type(exc).__name__} at the initial state of member {j}: "
+                        f"{_first_line(exc)} (later in a run such a member fails alone)"
+                    ) from exc
             what = f"fails on the ensemble ({type(failure).__name__}: {_first_line(failure)})"
         raise InvalidBError(
             f"B works on one state but {what}: on an ensemble of shape {W.shape} it must act "
