@@ -70,3 +70,23 @@ def test_sigkill_then_resume_is_bit_for_bit(tmp_path: Path) -> None:
     assert st["iterations_mean"] == st["n_iterations"] / (48000 - st["first_step"])
     shown = subprocess.run(_cmd("info", str(path)), capture_output=True, text=True).stdout
     assert f"steps {st['first_step'] + 1} to 48000: the resumed part" in shown
+
+
+def test_resuming_a_complete_run_changes_nothing(tmp_path: Path) -> None:
+    """A complete file has nothing to resume: Python refuses (ResultFileError), the command
+    line says so and exits 0; the file keeps its bytes (its statistics are the run's)."""
+    import pytest
+
+    import isoflow as iso
+
+    path = tmp_path / "done.h5"
+    prob, W0 = iso.models.rigid_body(4)
+    iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=30, save_every=10, progress=False,
+              writer=io.HDF5Writer(path))  # fmt: skip
+    before = path.read_bytes()
+    with pytest.raises(iso.ResultFileError, match=r"the run is complete \(30 of 30 steps\)"):
+        io.resume(path)
+    out = subprocess.run(_cmd("run", "--resume", str(path)), capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert "the run is complete (30 of 30 steps); nothing to resume" in out.stdout
+    assert path.read_bytes() == before

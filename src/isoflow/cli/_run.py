@@ -178,9 +178,16 @@ def _resume(args: argparse.Namespace) -> int:
             f"--resume continues the run the file records; {flags} cannot change it "
             "(only --model and --param, to name your model again)"
         )
-    note = sweep_task_note(args.resume, io.info(args.resume)["config"])
+    about = io.info(args.resume)
+    note = sweep_task_note(args.resume, about["config"])
     if note is not None:
         raise UserError(f"{args.resume} is {note}")
+    if about["state"] == "complete":  # nothing to do, and the file stays as it is
+        print(
+            f"{args.resume}: the run is complete ({about['step']} of "
+            f"{about['meta']['n_steps']} steps); nothing to resume"
+        )
+        return 0
     name = _model_name(args)
     if name is None and args.param:
         raise UserError("--param on --resume needs the model too (--model SPEC)")

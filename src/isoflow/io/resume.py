@@ -37,7 +37,7 @@ from ..problems import IsospectralProblem
 from ..registry import ModelSpec, load_model
 from ..threads import ThreadRequest, plan_threads
 from .lock import WriteLock
-from .reader import iter_rows, open_result, read_checkpoint
+from .reader import iter_rows, open_result, read_checkpoint, run_state
 from .rebuild import rebuild_run
 from .recovery import recover
 from .writer import HDF5Writer
@@ -117,7 +117,8 @@ def resume(
     Parameters
     ----------
     path : str or Path
-        A result file written by :class:`~isoflow.io.HDF5Writer` (complete, stopped or killed).
+        A result file written by :class:`~isoflow.io.HDF5Writer` whose run was stopped or
+        killed (a complete run is refused: there is nothing to resume).
     problem, method : optional
         The run's problem and method; by default rebuilt from the file's configuration
         (:func:`~isoflow.io.rebuild.rebuild_run`). Needed for runs of problems you built
@@ -158,8 +159,8 @@ def resume(
         source of the user code defining it changed (the file is left unchanged). Files
         written before isoflow recorded fingerprints are resumed without this check.
     ResultFileError
-        Another process writes the file; the file is damaged or crafted; or the problem or
-        method do not match the run it records (the file is left unchanged).
+        Another process writes the file; the file is damaged or crafted; its run is complete;
+        or the problem or method do not match the run it records (the file is left unchanged).
     ConfigError
         The stored configuration does not rebuild the recorded run (another model than
         ``model``, a parameter that differs from ``params``, a size out of range, a model that
@@ -189,6 +190,11 @@ def resume(
             cp = read_checkpoint(o)
             if cp is None:
                 raise o.fail("no checkpoint to resume from (start the run again)")
+            if run_state(o, cp)[0] == "complete":
+                raise o.fail(
+                    f"the run is complete ({cp.step} of {o.meta['n_steps']} steps): nothing to "
+                    "resume (iso.io.load reads it)"
+                )
             config, meta = o.config, o.meta
             needs_rewrite = o.version < 2 or o.flagged
             problem, method = _rebuild(p, config, meta, problem, method, model, params)
