@@ -86,9 +86,10 @@ class _Interrupt(Exception):
     pass
 
 
-def _interrupted_run(path: Path, monkeypatch) -> Any:
+def _interrupted_run(path: Path, monkeypatch, **writer: Any) -> Any:
     """The reference run, and ``path`` holding the same run interrupted after three chunks
-    (an exception raised by the compiled runner's fourth chunk)."""
+    (an exception raised by the compiled runner's fourth chunk), written with ``writer``'s
+    settings (default: 8 rows a chunk)."""
     from isoflow._compiled.runner import CompiledRunner
 
     cfg, problem, y0, method, kw = _build()
@@ -105,8 +106,9 @@ def _interrupted_run(path: Path, monkeypatch) -> Any:
     monkeypatch.setattr(CompiledRunner, "advance", flaky)
     with pytest.raises(_Interrupt):
         iso.solve(
-            problem, method, y0, **kw, progress=False, writer=io.HDF5Writer(path, cfg, chunk_rows=8)
-        )
+            problem, method, y0, **kw, progress=False,
+            writer=io.HDF5Writer(path, cfg, **({"chunk_rows": 8} | writer)),
+        )  # fmt: skip
     monkeypatch.setattr(CompiledRunner, "advance", original)
     return ref
 
@@ -123,6 +125,36 @@ def test_interrupted_run_resumes_bit_for_bit(tmp_path: Path, monkeypatch) -> Non
     run = io.load(path)
     assert np.array_equal(run.ys, ref.ys) and np.array_equal(run.ts, ref.ts)
     assert sol.diagnostics.summary() == ref.diagnostics.summary()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"throw": "x"}, r"throw must be True or False, got 'x'"),
+        ({"progress": "x"}, r"progress must be True, False or None, got 'x'"),
+        ({"status_every": -5}, r"status_every must be a positive number of seconds"),
+        ({"chunk_rows": 0}, r"chunk_rows must be an integer >= 1, got 0"),
+        ({"flush_seconds": "x"}, r"flush_seconds must be a number of seconds >= 0, got 'x'"),
+        ({"force": "yes"}, r"force must be True or False, got 'yes'"),
+    ],
+)
+def test_bad_resume_options_are_refused_before_the_file_is_touched(
+    tmp_path: Path,
+    monkeypatch,
+    kwargs,
+    match,  # type: ignore[no-untyped-def]
+) -> None:
+    """Checked first: the file is not left locked or live (a retry in the same process
+    resumed it), and it resumes afterwards."""
+    path = tmp_path / "rb.h5"
+    ref = _interrupted_run(path, monkeypatch)
+    before = path.read_bytes()
+    with pytest.raises(iso.ParameterError, match=match):
+        io.resume(path, **kwargs)
+    assert path.read_bytes() == before and not Path(f"{path}.lock").exists()
+    assert io.info(path)["state"] != "live"
+    sol = io.resume(path, progress=False)
+    assert sol.success and np.array_equal(sol.ys[-1], ref.ys[-1])
 
 
 def test_resume_of_a_complete_run_changes_nothing(tmp_path: Path) -> None:
@@ -275,6 +307,7 @@ def test_version_1_files_read_and_resume_to_version_2(tmp_path: Path, monkeypatc
         ({"flush_seconds": -1}, r"flush_seconds must be a number of seconds >= 0, got -1"),
         ({"flush_seconds": float("nan")}, r"flush_seconds must be a number of seconds >= 0"),
         ({"config": {"a": np.zeros(2)}}, r"config must be JSON-ready .*ndarray"),
+        ({"force": "no"}, r"force must be True or False, got 'no'"),  # "no" was true
     ],
 )
 def test_bad_writer_arguments_are_one_line_parameter_errors(tmp_path: Path, kwargs, match) -> None:  # type: ignore[no-untyped-def]
@@ -290,7 +323,6 @@ def test_a_resume_writes_with_the_runs_recorded_chunk_rows_and_flush_interval(
     --resume``) writes with them unless given others (a run flushed every 300 s must not be
     resumed into one that writes a checkpoint every second)."""
     resume_module = importlib.import_module("isoflow.io.resume")  # the module, not the function
-    prob, W0 = iso.models.rigid_body(3)
     seen: list[tuple[int, float]] = []
     reopen = resume_module.HDF5Writer.reopen
 
@@ -298,14 +330,14 @@ def test_a_resume_writes_with_the_runs_recorded_chunk_rows_and_flush_interval(
         seen.append((kw["chunk_rows"], kw["flush_seconds"]))
         return reopen(*args, **kw)
 
-    monkeypatch.setattr(resume_module.HDF5Writer, "reopen", spy)
     for flush, recorded in ((300.0, 300.0), (np.inf, None)):
-        path = tmp_path / f"run_{flush}.h5"
-        writer = io.HDF5Writer(path, {}, chunk_rows=7, flush_seconds=flush)
-        iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=20, writer=writer, progress=False)
-        assert io.info(path)["meta"]["writer"] == {"chunk_rows": 7, "flush_seconds": recorded}
-        io.resume(path, problem=prob, method=iso.IsoMP(), progress=False)
-        io.resume(path, problem=prob, method=iso.IsoMP(), progress=False, chunk_rows=3,
-                  flush_seconds=0.5)  # fmt: skip
+        paths = [tmp_path / f"run_{flush}_{k}.h5" for k in range(2)]
+        for path in paths:  # stopped runs (a complete one is not reopened)
+            _interrupted_run(path, monkeypatch, chunk_rows=7, flush_seconds=flush)
+            assert io.info(path)["meta"]["writer"] == {"chunk_rows": 7, "flush_seconds": recorded}
+        monkeypatch.setattr(resume_module.HDF5Writer, "reopen", spy)
+        io.resume(paths[0], progress=False)
+        io.resume(paths[1], progress=False, chunk_rows=3, flush_seconds=0.5)
+        monkeypatch.undo()
         assert seen[-2:] == [(7, flush), (3, 0.5)]
     assert resume_module._writer_settings({}, None, None) == (256, 1.0)  # an older file

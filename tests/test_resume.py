@@ -72,21 +72,40 @@ def test_sigkill_then_resume_is_bit_for_bit(tmp_path: Path) -> None:
     assert f"steps {st['first_step'] + 1} to 48000: the resumed part" in shown
 
 
-def test_resuming_a_complete_run_changes_nothing(tmp_path: Path) -> None:
-    """A complete file has nothing to resume: Python refuses (ResultFileError), the command
-    line says so and exits 0; the file keeps its bytes (its statistics are the run's)."""
-    import pytest
-
-    import isoflow as iso
+def test_resuming_a_run_that_ended_changes_nothing(tmp_path: Path) -> None:
+    """A complete or failed file has nothing to continue: resume returns the run as recorded
+    (its statistics, not a zero-step call's), the command line says so (exit 0 and 1); the
+    file keeps its bytes."""
 
     path = tmp_path / "done.h5"
-    prob, W0 = iso.models.rigid_body(4)
-    iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=30, save_every=10, progress=False,
-              writer=io.HDF5Writer(path))  # fmt: skip
+    made = subprocess.run(
+        _cmd("run", "rigid-body", "--n", "4", "--dt", "0.1", "--n-steps", "30", "--save-every",
+             "10", "--out", str(path), "--quiet"), capture_output=True, text=True,
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    ran = io.load(path)
     before = path.read_bytes()
-    with pytest.raises(iso.ResultFileError, match=r"the run is complete \(30 of 30 steps\)"):
-        io.resume(path)
+    again = io.resume(path)
+    assert again.stats.as_dict() == ran.run_info["stats"] and again.success
+    assert again.message == ran.run_info["message"]
+    assert np.array_equal(again.ys[-1], ran.ys[-1]) and again.ts[-1] == ran.ts[-1]
+    assert again.diagnostics is not None and again.diagnostics.summary() == ran.drifts
     out = subprocess.run(_cmd("run", "--resume", str(path)), capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
-    assert "the run is complete (30 of 30 steps); nothing to resume" in out.stdout
+    assert "the run is complete (30 of 30 steps): nothing to resume" in out.stdout
     assert path.read_bytes() == before
+
+    failed = tmp_path / "failed.h5"  # h ||B|| far above 2: the first stage diverges
+    made = subprocess.run(
+        _cmd("run", "rigid-body", "--n", "4", "--dt", "50", "--n-steps", "30", "--out",
+             str(failed), "--quiet"), capture_output=True, text=True,
+    )  # fmt: skip
+    assert made.returncode == 1 and io.info(failed)["state"] == "failed", made.stderr
+    ran = io.load(failed)
+    before = failed.read_bytes()
+    again = io.resume(failed)
+    assert again.stats.as_dict() == ran.run_info["stats"] and not again.success
+    assert again.message == ran.run_info["message"] and int(again.failed_step) == 0
+    out = subprocess.run(_cmd("run", "--resume", str(failed)), capture_output=True, text=True)
+    assert out.returncode == 1 and "the run failed" in out.stdout, out.stderr
+    assert failed.read_bytes() == before

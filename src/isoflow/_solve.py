@@ -369,6 +369,7 @@ def solve(
     _check_save_every(save_every)
     _check_status_every(status_every)
     _check_flags(progress, throw)
+    check_flag(diagnostics, "diagnostics")
     dt_, n = time_grid(t0, t1, dt, n_steps)
     with compile_clock(show=progress is not False) as clock, run_threads(threads) as pools:
         W = _check_state(problem, y0, "y0")
@@ -398,8 +399,20 @@ def _check_flags(progress: Any, throw: Any) -> None:
     count as true)."""
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
         raise ParameterError(f"progress must be True, False or None, got {progress!r}")
-    if not isinstance(throw, (bool, np.bool_)):
-        raise ParameterError(f"throw must be True or False, got {throw!r}")
+    check_flag(throw, "throw")
+
+
+def check_flag(value: Any, name: str) -> None:
+    """``value`` is a bool (``ParameterError`` naming ``name`` otherwise: a string such as
+    ``"no"`` would count as true)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ParameterError(f"{name} must be True or False, got {value!r}")
+
+
+def check_continue_options(progress: Any, throw: Any, status_every: Any) -> None:
+    """The options of a continued run, checked before a file is touched."""
+    _check_flags(progress, throw)
+    _check_status_every(status_every)
 
 
 def _check_save_every(save_every: Any) -> None:

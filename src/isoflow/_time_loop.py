@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from ._compile_clock import CompileClock
 from ._errors import IsoflowError, ResultWriteError
-from ._failures import describe, exception_for
+from ._failures import MemberFailures, describe, exception_for
 from ._fingerprint import model_fingerprint
 from ._save_grid import SaveGrid
 from ._solution import RUN_FAILED, RUN_FINISHED, RUN_INTERRUPTED, RunState, Solution, SolveStats
@@ -454,11 +454,11 @@ def _stats(
     )
 
 
-def solution(r: OpenRun, outcome: _Outcome, stats: SolveStats) -> Solution:
-    """The :class:`Solution` of a run that ended: every saved state (in memory), or the first
-    and the last state (streamed to a file)."""
-    fails = r.runner.failures
-    batch = r.batch
+def failure_fields(
+    fails: MemberFailures, batch: tuple[int, ...]
+) -> tuple[Array, dict[tuple[int, ...], str]]:
+    """:attr:`Solution.failed_step` and :attr:`Solution.failure_reasons` of a failure record
+    (flat member indices) for an ensemble of shape ``batch``."""
     failed_step = fails.step.reshape(batch) if batch else np.asarray(fails.step[0])
     reasons = {
         (tuple(int(i) for i in np.unravel_index(int(m), batch)) if batch else ()): fails.reason(
@@ -466,6 +466,13 @@ def solution(r: OpenRun, outcome: _Outcome, stats: SolveStats) -> Solution:
         )
         for m in fails.failed
     }
+    return failed_step, reasons
+
+
+def solution(r: OpenRun, outcome: _Outcome, stats: SolveStats) -> Solution:
+    """The :class:`Solution` of a run that ended: every saved state (in memory), or the first
+    and the last state (streamed to a file)."""
+    failed_step, reasons = failure_fields(r.runner.failures, r.batch)
     common: dict[str, Any] = {
         "stats": stats,
         "success": outcome.status == RUN_FINISHED,

@@ -130,8 +130,8 @@ class _Pairs:
                 f"pairs of {self.name} have shape (*batch, {', '.join(map(str, self.shape))}), "
                 f"got {Ya.shape}"
             )
-        core = (slice(None),) * k
-        return Ya[(..., 0, *core)], Ya[(..., 1, *core)]
+        core: tuple[Any, ...] = (slice(None),) * k
+        return Ya[(Ellipsis, 0, *core)], Ya[(Ellipsis, 1, *core)]
 
     def dagger(self, G: Array) -> Array:
         r"""The map from gradients to ``B``: the fields swapped, each daggered.

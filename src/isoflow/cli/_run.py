@@ -182,12 +182,6 @@ def _resume(args: argparse.Namespace) -> int:
     note = sweep_task_note(args.resume, about["config"])
     if note is not None:
         raise UserError(f"{args.resume} is {note}")
-    if about["state"] == "complete":  # nothing to do, and the file stays as it is
-        print(
-            f"{args.resume}: the run is complete ({about['step']} of "
-            f"{about['meta']['n_steps']} steps); nothing to resume"
-        )
-        return 0
     name = _model_name(args)
     if name is None and args.param:
         raise UserError("--param on --resume needs the model too (--model SPEC)")
@@ -205,6 +199,14 @@ def _resume(args: argparse.Namespace) -> int:
         force=args.force,
         status_every=None if args.quiet else args.status_every,
     )
+    if about["state"] in ("complete", "failed"):  # resume checked it and wrote nothing
+        how = "failed" if about["state"] == "failed" else "is complete"
+        steps = f"{about['step']} of {about['meta']['n_steps']} steps"
+        print(
+            f"{args.resume}: the run {how} ({steps}): nothing to resume "
+            f"(isoflow info {args.resume} shows it)"
+        )
+        return 0 if sol.success else 1
     print("\n".join(summary_lines(f"resumed {args.resume}", sol, args.resume)))
     return 0 if sol.success else 1
 

@@ -24,7 +24,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .._errors import IsoflowError, ResultFileError
+from .._errors import IsoflowError, ParameterError, ResultFileError
 from .._failures import MemberFailures
 from .._save_grid import SaveGrid
 from ..diagnostics import DriftAccumulator
@@ -496,6 +496,8 @@ def info(path: str | os.PathLike[str], *, verify_states: bool = False) -> dict[s
         ``verified`` (every saved state checked), ``n_saved`` (valid saved states),
         ``t_last``, ``step``, ``complete``, ``run_info`` and ``drifts``.
     """
+    if not isinstance(verify_states, (bool, np.bool_)):
+        raise ParameterError(f"verify_states must be True or False, got {verify_states!r}")
     return _live_retry(path, lambda: _info(path, verify_states))
 
 

@@ -20,6 +20,7 @@ for bit.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Mapping
@@ -29,18 +30,28 @@ from typing import Any
 import numpy as np
 
 from .._errors import ModelChangedError, ParameterError, ResultFileError
+from .._failures import MemberFailures
 from .._fingerprint import fingerprint_changes, model_fingerprint
-from .._solve import RunState, Solution, check_restart, continue_run
+from .._solution import RUN_FINISHED, SolveStats
+from .._solve import (
+    RunState,
+    Solution,
+    check_continue_options,
+    check_flag,
+    check_restart,
+    continue_run,
+)
+from .._time_loop import failure_fields
 from ..diagnostics import DiagnosticsAccumulator
 from ..methods import Method
 from ..problems import IsospectralProblem
 from ..registry import ModelSpec, load_model
 from ..threads import ThreadRequest, plan_threads
 from .lock import WriteLock
-from .reader import iter_rows, open_result, read_checkpoint, run_state
+from .reader import Checkpoint, iter_rows, open_result, read_checkpoint, run_state
 from .rebuild import rebuild_run
 from .recovery import recover
-from .writer import HDF5Writer
+from .writer import HDF5Writer, check_writer_settings
 
 __all__ = ["resume"]
 
@@ -117,8 +128,9 @@ def resume(
     Parameters
     ----------
     path : str or Path
-        A result file written by :class:`~isoflow.io.HDF5Writer` whose run was stopped or
-        killed (a complete run is refused: there is nothing to resume).
+        A result file written by :class:`~isoflow.io.HDF5Writer` (complete, stopped or killed;
+        a run that ended, complete or failed, is returned as it ended, and its file is not
+        written: there is nothing to continue).
     problem, method : optional
         The run's problem and method; by default rebuilt from the file's configuration
         (:func:`~isoflow.io.rebuild.rebuild_run`). Needed for runs of problems you built
@@ -159,8 +171,8 @@ def resume(
         source of the user code defining it changed (the file is left unchanged). Files
         written before isoflow recorded fingerprints are resumed without this check.
     ResultFileError
-        Another process writes the file; the file is damaged or crafted; its run is complete;
-        or the problem or method do not match the run it records (the file is left unchanged).
+        Another process writes the file; the file is damaged or crafted; or the problem or
+        method do not match the run it records (the file is left unchanged).
     ConfigError
         The stored configuration does not rebuild the recorded run (another model than
         ``model``, a parameter that differs from ``params``, a size out of range, a model that
@@ -172,6 +184,12 @@ def resume(
         rebuild the problem); checked before the file is touched.
     """
     plan_threads(threads)  # a malformed request is refused before anything else
+    check_continue_options(progress, throw, status_every)
+    check_flag(force, "force")
+    if chunk_rows is not None or flush_seconds is not None:
+        check_writer_settings(
+            1 if chunk_rows is None else chunk_rows, 1.0 if flush_seconds is None else flush_seconds
+        )
     if problem is not None and (model is not None or params):
         raise ParameterError(
             "model= and params= rebuild the run's problem: give them or problem=, not both"
@@ -190,11 +208,7 @@ def resume(
             cp = read_checkpoint(o)
             if cp is None:
                 raise o.fail("no checkpoint to resume from (start the run again)")
-            if run_state(o, cp)[0] == "complete":
-                raise o.fail(
-                    f"the run is complete ({cp.step} of {o.meta['n_steps']} steps): nothing to "
-                    "resume (iso.io.load reads it)"
-                )
+            ended = run_state(o, cp)[0] in ("complete", "failed")
             config, meta = o.config, o.meta
             needs_rewrite = o.version < 2 or o.flagged
             problem, method = _rebuild(p, config, meta, problem, method, model, params)
@@ -216,6 +230,8 @@ def resume(
                     acc.set_first_state(first)
                 acc.absorb(data["ts"], {k: data[k] for k in names[2:]})
             _check_model(p, meta, problem, first, force)
+            if ended:  # nothing to continue: the recorded run, the file untouched
+                return _recorded(problem, cp, t0, dt, n_steps, acc)
         chunk_rows, flush_seconds = _writer_settings(meta, chunk_rows, flush_seconds)
         if needs_rewrite:
             cp = recover(p, chunk_rows)
@@ -231,6 +247,31 @@ def resume(
     return continue_run(
         restart, writer=writer, accumulator=acc, progress=progress, throw=throw, threads=threads,
         status_every=status_every,
+    )  # fmt: skip
+
+
+def _recorded(
+    problem: IsospectralProblem, cp: Checkpoint, t0: float, dt: float, n_steps: int,
+    acc: DiagnosticsAccumulator,
+) -> Solution:  # fmt: skip
+    """The :class:`Solution` of a run that ended (complete or failed) as its file records it:
+    the last state, the statistics, status and message of the call that ended it, the drifts
+    over every row."""
+    info = cp.run_info or {}
+    stats_any = info.get("stats")
+    recorded: dict[str, Any] = stats_any if isinstance(stats_any, dict) else {}
+    known = {f.name for f in dataclasses.fields(SolveStats)}
+    stats = SolveStats(**{k: v for k, v in recorded.items() if k in known})
+    batch = problem.algebra.batch_shape(cp.y)
+    members = int(np.prod(batch, dtype=np.int64))
+    fails = cp.failures if cp.failures is not None else MemberFailures.none(members)
+    failed_step, reasons = failure_fields(fails, batch)
+    status = int(info.get("status", RUN_FINISHED))
+    return Solution(
+        ts=np.array([t0 + cp.step * dt]), ys=np.asarray(cp.y)[None], stats=stats,
+        success=status == RUN_FINISHED, status=status, message=str(info.get("message", "")),
+        diagnostics=acc.result(), t0=t0, dt=dt, n_steps=n_steps, failed_step=failed_step,
+        failure_reasons=reasons,
     )  # fmt: skip
 
 

@@ -70,6 +70,25 @@ def check_target(path: Path, *, force: bool) -> Path:
     return target
 
 
+def check_writer_settings(chunk_rows: Any, flush_seconds: Any) -> None:
+    """``chunk_rows`` an integer >= 1 and ``flush_seconds`` a number >= 0 (``inf``: every
+    ``chunk_rows`` states only), else a :class:`~isoflow.ParameterError`."""
+    if (
+        isinstance(chunk_rows, bool)
+        or not isinstance(chunk_rows, (int, np.integer))
+        or (chunk_rows < 1)
+    ):
+        raise ParameterError(f"chunk_rows must be an integer >= 1, got {chunk_rows!r}")
+    if (
+        isinstance(flush_seconds, bool)
+        or not isinstance(flush_seconds, (int, float, np.integer, np.floating))
+        or not flush_seconds >= 0  # NaN fails too
+    ):
+        raise ParameterError(
+            f"flush_seconds must be a number of seconds >= 0, got {flush_seconds!r}"
+        )
+
+
 class HDF5Writer:
     """Stream a run to an HDF5 file (see :mod:`isoflow.io` for the layout and guarantees).
 
@@ -111,20 +130,9 @@ class HDF5Writer:
         flush_seconds: float = 1.0,
         force: bool = False,
     ) -> None:
-        if (
-            isinstance(chunk_rows, bool)
-            or not isinstance(chunk_rows, (int, np.integer))
-            or chunk_rows < 1
-        ):
-            raise ParameterError(f"chunk_rows must be an integer >= 1, got {chunk_rows!r}")
-        if (
-            isinstance(flush_seconds, bool)
-            or not isinstance(flush_seconds, (int, float, np.integer, np.floating))
-            or not flush_seconds >= 0  # NaN fails too; inf: every chunk_rows states only
-        ):
-            raise ParameterError(
-                f"flush_seconds must be a number of seconds >= 0, got {flush_seconds!r}"
-            )
+        check_writer_settings(chunk_rows, flush_seconds)
+        if not isinstance(force, (bool, np.bool_)):  # "no" would count as true: a lost file
+            raise ParameterError(f"force must be True or False, got {force!r}")
         self.path = Path(path)
         self.force = bool(force)
         self._target = check_target(self.path, force=self.force)

@@ -270,7 +270,14 @@ MODELS: dict[str, ModelSpec] = {
             "isoflow.models:toda",
             {
                 "n": _size("number of particles", 12, 2, DENSE_MAX_N),
-                "seed": _seed(),
+                # as iso.models.toda: no seed is the state a = 0, b = 1, not a random one
+                "seed": Param(
+                    int,
+                    None,
+                    "seed of a random initial state (unset: a_i = 0, b_i = 1, "
+                    "eigenvalues 2 cos(k pi / (n + 1)))",
+                    low=0,
+                ),
             },
             "non-periodic Toda lattice on sym(n), Flaschka form",
             builtin=True,
