@@ -317,3 +317,16 @@ def test_a_generator_gives_the_numbers_of_its_seed() -> None:
     _, W7 = iso.models.brockett(n=4, seed=7)
     _, Wg = iso.models.brockett(n=4, seed=np.random.default_rng(7))
     assert W7.tobytes() == Wg.tobytes()
+
+
+def test_states_too_large_for_memory_are_parameter_errors() -> None:
+    """Sizes no machine here holds are refused with a ParameterError naming the estimate,
+    before numpy tries (and fails, or swaps) to allocate them."""
+    with pytest.raises(iso.ParameterError, match=r"so\(10\)\.random: batch \(1000000000,\)"):
+        iso.algebras.so(10).random(seed=0, batch=(10**9,))
+    with pytest.raises(iso.ParameterError, match=r"the basis of so\(1000000\) needs about"):
+        iso.algebras.so(10**6).random(0)
+    prob, y0 = iso.models.rigid_body(5)
+    huge = np.broadcast_to(y0, (10**9, 5, 5))  # a view: no memory until it is copied
+    with pytest.raises(iso.ParameterError, match=r"the y0 \(an ensemble of shape"):
+        iso.solve(prob, iso.IsoMP(), huge, dt=0.1, n_steps=2)

@@ -205,6 +205,10 @@ class Algebra(ABC):
         from .._seeds import generator
 
         rng = generator(seed, f"{self.name}.random: seed")
+        _require_memory(
+            float(np.prod(batch, dtype=np.float64)) * self.dim * 8.0, 4.0,
+            f"{self.name}.random: batch {tuple(batch)}",
+        )  # fmt: skip
         coords = rng.standard_normal((*batch, self.dim)) * scale
         return self.from_coords(coords)
 
@@ -305,6 +309,10 @@ class Algebra(ABC):
                 f"{what} must have shape (*batch, {', '.join(map(str, self.shape))}) for "
                 f"{self.name}, got {Wa.shape}"
             )
+        _require_memory(
+            float(Wa.size) * np.dtype(self.dtype).itemsize, 4.0,
+            f"the {what} (an ensemble of shape {Wa.shape})",
+        )  # its copies and the checks' temporaries; a broadcast view costs no memory itself
         Wa = Wa.astype(self.dtype, copy=False)
         if not np.all(np.isfinite(Wa)):
             raise NonFiniteError(f"All entries of the {what} must be finite (found NaN or Inf).")
@@ -430,6 +438,8 @@ class MatrixAlgebra(Algebra):
         ``(e_{p(a)} + s_a e_a)/sqrt 2`` (or ``e_a`` when ``p(a) = a`` and ``s_a = +1``).
         """
         m = self.n * self.n * (2 if self.is_complex else 1)
+        # the probes and the lists of the basis's entries (Python objects): ~ 100 bytes each
+        _require_memory(8.0 * m, 12.0, f"the basis of {self.name}")
         probe = self._unflatten(np.arange(1, m + 1, dtype=np.float64))
         image = self._flatten(self.sigma(probe))
         perm = np.rint(np.abs(image)).astype(np.int64) - 1
@@ -512,3 +522,17 @@ def _sum_of_squares(M: Array) -> Array:
     if M.dtype.kind != "f":
         M = M.astype(np.float64)
     return np.einsum("...ij,...ij->...", M, M)
+
+
+#: States below this many bytes are not checked against the available memory.
+_MEMORY_CHECK_BYTES = 64 * 2**20
+
+
+def _require_memory(state_bytes: float, peak_states: float, what: str) -> None:
+    """A :class:`~isoflow.ParameterError` for a state too large for this machine's memory
+    (checked from :data:`_MEMORY_CHECK_BYTES` on), instead of numpy's ``MemoryError``."""
+    if state_bytes < _MEMORY_CHECK_BYTES:
+        return
+    from ..models._checks import require_memory
+
+    require_memory(state_bytes, peak_states, what)
