@@ -264,6 +264,36 @@ def test_a_malformed_environment_bound_is_named(monkeypatch: pytest.MonkeyPatch)
     assert plan_threads(1).blas == 1
 
 
+def test_a_malformed_numba_thread_count_is_named_before_numba_refuses_it() -> None:
+    """numba's own import fails on NUMBA_NUM_THREADS=0 ("must be > 0", naming nothing): the
+    models, the solve and the command line name the variable first, in one line."""
+    message = (
+        "NUMBA_NUM_THREADS='0' is not a positive thread count; set it to an integer >= 1 or "
+        "unset it"
+    )
+    code = (
+        "import isoflow as iso\n"
+        "try:\n"
+        "    iso.models.rigid_body(4)\n"
+        "except iso.ParameterError as exc:\n"
+        "    print(exc)\n"
+        "alg = iso.algebras.so(3)\n"
+        "prob = iso.IsospectralProblem(B=lambda W: -W, algebra=alg)\n"
+        "try:\n"
+        "    iso.solve(prob, iso.IsoMP(), alg.random(0), dt=0.1, n_steps=2)\n"
+        "except iso.ParameterError as exc:\n"
+        "    print(exc)\n"
+    )
+    env = {**_clean_env(), "NUMBA_NUM_THREADS": "0"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=600, check=False)  # fmt: skip
+    assert out.returncode == 0 and out.stdout.splitlines() == [message] * 2, out.stderr[-2000:]
+    cli = subprocess.run([sys.executable, "-m", "isoflow.cli", "run", "rigid-body", "--n-steps",
+                          "2"], env=env, capture_output=True, text=True, timeout=600,
+                         check=False)  # fmt: skip
+    assert cli.returncode == 1 and cli.stderr.strip() == f"isoflow: error: {message}"
+
+
 @two_cores
 def test_environment_variables_bound_every_request(
     unbounded: None, monkeypatch: pytest.MonkeyPatch

@@ -169,6 +169,9 @@ def compile_clock(show: bool) -> Iterator[CompileClock]:
         Announce compilations on stderr (they are logged at INFO in any case); :data:`SHOW`
         forces it.
     """
+    from .threads import check_numba_environment
+
+    check_numba_environment()  # by name, before numba's own import fails on it
     from numba.core import event
 
     clock = CompileClock(show or SHOW)

@@ -143,6 +143,13 @@ def _environment_count(name: str) -> int | None:
     return int(first)
 
 
+def check_numba_environment() -> None:
+    """Refuse a malformed :data:`NUMBA_ENVIRONMENT` variable by name before numba is imported
+    (numba itself fails its import with "Number of threads specified must be > 0")."""
+    for name in NUMBA_ENVIRONMENT:
+        _environment_count(name)
+
+
 def environment_limits() -> dict[str, int | None]:
     """Upper bounds on the thread counts from the environment: ``{"blas", "numba"}``.
 

@@ -310,7 +310,8 @@ class Algebra(ABC):
                 f"{self.name}, got {Wa.shape}"
             )
         _require_memory(
-            float(Wa.size) * np.dtype(self.dtype).itemsize, 4.0,
+            float(Wa.size) * np.dtype(self.dtype).itemsize,
+            4.0,
             f"the {what} (an ensemble of shape {Wa.shape})",
         )  # its copies and the checks' temporaries; a broadcast view costs no memory itself
         Wa = Wa.astype(self.dtype, copy=False)

@@ -202,6 +202,9 @@ def run_command(args: argparse.Namespace) -> int:
 
     announced = _compile_clock.SHOW  # the commands announce compilations; restored after
     try:
+        from ..threads import check_numba_environment
+
+        check_numba_environment()
         if not args.computes:
             return int(args.handler(args))
         from ..threads import thread_limits

@@ -46,6 +46,9 @@ __all__ = ["ParameterError", *sorted(_WHERE)]
 
 def __getattr__(name: str) -> Any:
     if name in _WHERE:
+        from ..threads import check_numba_environment
+
+        check_numba_environment()  # the models' modules import numba
         value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
         globals()[name] = value
         return value
