@@ -242,6 +242,22 @@ def test_a_second_writer_gets_a_clear_error(tmp_path: Path) -> None:
     assert after["state"] == "killed" and after["resumable"] and after["writer"] is None
 
 
+def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path: Path, long_ref: io.RunData) -> None:
+    """A batch system's time limit sends SIGTERM: the run checkpoints and closes its file
+    (stopped, no lock left), says so in one line, exits 143, and resumes bit for bit."""
+    path = tmp_path / "term.h5"
+    proc = subprocess.Popen(
+        isoflow_cmd(*LONG, "--out", str(path)), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
+    _wait_live(path, proc)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=600)
+    assert proc.returncode == 143 and err.decode().strip() == "isoflow: terminated (SIGTERM)"
+    assert _leftovers(tmp_path) == []
+    assert io.info(path)["state"] == "stopped"
+    _resumes_bit_for_bit(path, long_ref)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
 def test_signals_at_random_moments(tmp_path: Path, long_ref: io.RunData, sig: int) -> None:
     rng = np.random.default_rng(int(sig))

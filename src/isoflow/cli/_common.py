@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
 import warnings
 from collections.abc import Iterator, Sequence
@@ -201,6 +202,8 @@ def run_command(args: argparse.Namespace) -> int:
     from .. import _compile_clock
 
     announced = _compile_clock.SHOW  # the commands announce compilations; restored after
+    terminated: list[int] = []
+    previous = _on_sigterm(terminated)
     try:
         from ..threads import check_numba_environment
 
@@ -226,7 +229,31 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"isoflow: error: {msg}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
+        if terminated:
+            print("isoflow: terminated (SIGTERM)", file=sys.stderr)
+            return 143
         print("isoflow: interrupted", file=sys.stderr)
         return 130
     finally:
         _compile_clock.SHOW = announced
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _on_sigterm(terminated: list[int]) -> Any:
+    """Make SIGTERM (a batch system's time limit, ``kill``) stop a command as Ctrl-C does: the
+    run checkpoints and closes its file (resumable, no stale lock), instead of dying at once.
+    Returns the previous handler (``None`` outside the main thread, where none is set)."""
+
+    def stop(signum: int, frame: Any) -> None:
+        terminated.append(signum)
+        handler = signal.getsignal(signal.SIGINT)  # the run's, holding it back mid-chunk
+        if callable(handler):
+            handler(signal.SIGINT, frame)
+        else:
+            raise KeyboardInterrupt
+
+    try:
+        return signal.signal(signal.SIGTERM, stop)
+    except (ValueError, OSError):  # not the main thread
+        return None
