@@ -267,10 +267,11 @@ def test_B_that_raises_mid_run_keeps_the_run_so_far(W0) -> None:
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
-        ({"problem": None}, TypeError, "IsospectralProblem"),
-        ({"method": iso.IsoMP}, TypeError, r"iso.IsoMP\(\), not"),
-        ({"method": "isomp"}, TypeError, "isoflow method"),
-        ({"writer": "file.h5"}, TypeError, "HDF5Writer"),
+        ({"problem": None}, iso.ArgumentTypeError, "IsospectralProblem"),
+        ({"method": iso.IsoMP}, iso.ArgumentTypeError, r"iso.IsoMP\(\), not"),
+        ({"method": "isomp"}, iso.ArgumentTypeError, "isoflow method"),
+        ({"writer": "file.h5"}, iso.ArgumentTypeError, "HDF5Writer"),
+        ({"diagnostics": "no"}, iso.ParameterError, "diagnostics must be True or False"),
         ({"y0": np.zeros((0, 3, 3))}, iso.ShapeError, "empty ensemble"),
         ({"save_every": 0}, iso.ParameterError, "save_every"),
         ({"save_every": 2.5}, iso.ParameterError, "save_every"),
@@ -281,8 +282,25 @@ def test_B_that_raises_mid_run_keeps_the_run_so_far(W0) -> None:
 def test_wrong_kinds_of_argument_get_typed_errors(so3_problem, W0, kwargs, error, match) -> None:
     args = {"problem": so3_problem, "method": iso.IsoMP(), "y0": W0, **kwargs}
     rest = {k: v for k, v in kwargs.items() if k not in ("problem", "method", "y0")}
-    with pytest.raises(error, match=match):
+    with pytest.raises(error, match=match) as err:
         iso.solve(args["problem"], args["method"], args["y0"], dt=0.1, n_steps=2, **rest)
+    assert isinstance(err.value, iso.IsoflowError)  # every error raised on purpose
+    if error is iso.ArgumentTypeError:
+        assert isinstance(err.value, TypeError)  # and what `except TypeError` expects
+
+
+def test_problems_and_compiled_fields_of_the_wrong_kind_are_argument_type_errors() -> None:
+    alg = iso.algebras.so(3)
+    for make in (
+        lambda: iso.IsospectralProblem(B=lambda W: -W, algebra="so3"),
+        lambda: iso.IsospectralProblem(algebra=alg),
+        lambda: iso.IsospectralProblem(B=3.0, algebra=alg),
+        lambda: iso.CompiledB(lambda W, out: None),
+    ):
+        with pytest.raises(iso.ArgumentTypeError):
+            make()
+    with pytest.raises(iso.ParameterError, match="config must be a mapping"):
+        iso.io.HDF5Writer("never.h5", "cfg")  # type: ignore[arg-type]
 
 
 def test_hamiltonian_returning_nonsense_is_named(W0) -> None:

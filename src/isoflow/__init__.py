@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from . import algebras as algebras
 from . import noise as noise
 from . import splitting as splitting
+from ._errors import ArgumentTypeError as ArgumentTypeError
 from ._errors import ConvergenceError as ConvergenceError
 from ._errors import DtypeError as DtypeError
 from ._errors import InvalidBError as InvalidBError
@@ -111,6 +112,7 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "RK4",
+    "ArgumentTypeError",
     "ClassicalMidpoint",
     "CompiledB",
     "Composition",

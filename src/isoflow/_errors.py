@@ -8,6 +8,7 @@ fits, from the matching builtin (``ValueError``, ``TypeError``, ``RuntimeError``
 from __future__ import annotations
 
 __all__ = [
+    "ArgumentTypeError",
     "ConvergenceError",
     "DtypeError",
     "InvalidBError",
@@ -60,6 +61,11 @@ class NotInSpaceError(IsoflowError, ValueError):
 
 class ParameterError(IsoflowError, ValueError):
     """A model, space or method parameter is out of range or malformed (e.g. ``n < 1``)."""
+
+
+class ArgumentTypeError(IsoflowError, TypeError):
+    """An argument of the wrong kind: not a problem, a method, an algebra, a callable ``B``,
+    a numba-compiled function where the argument names one."""
 
 
 class UnsupportedAlgebraError(IsoflowError, TypeError):

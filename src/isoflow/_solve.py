@@ -19,7 +19,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._compile_clock import compile_clock
-from ._errors import ParameterError, ShapeError, StepSizeError, TimeSpanError
+from ._errors import (
+    ArgumentTypeError,
+    ParameterError,
+    ShapeError,
+    StepSizeError,
+    TimeSpanError,
+)
 from ._failures import step_exception
 from ._save_grid import SaveGrid
 from ._solution import RUN_FAILED, RUN_FINISHED, RUN_INTERRUPTED, RunState, Solution, SolveStats
@@ -156,17 +162,19 @@ def _real(x: Any, what: str, error: type[Exception]) -> float:
 def _check_objects(problem: Any, method: Any, writer: Any = None) -> None:
     """Clear errors for the wrong kind of object where a problem, method or writer belongs."""
     if not isinstance(problem, IsospectralProblem):
-        raise TypeError(
+        raise ArgumentTypeError(
             "problem must be an iso.IsospectralProblem (e.g. from iso.models.rigid_body()), "
             f"got {type(problem).__name__}"
         )
     if isinstance(method, type) and issubclass(method, Method):
-        raise TypeError(
+        raise ArgumentTypeError(
             f"method must be a method instance: write iso.{method.__name__}(), not "
             f"iso.{method.__name__}"
         )
     if not isinstance(method, Method):
-        raise TypeError(f"method must be an isoflow method (e.g. iso.IsoMP()), got {method!r}")
+        raise ArgumentTypeError(
+            f"method must be an isoflow method (e.g. iso.IsoMP()), got {method!r}"
+        )
     refuse_noise(problem, method)
     if writer is not None and not isinstance(writer, StreamWriter):
         hint = (
@@ -174,7 +182,7 @@ def _check_objects(problem: Any, method: Any, writer: Any = None) -> None:
             if isinstance(writer, (str, bytes)) or hasattr(writer, "__fspath__")
             else ""
         )
-        raise TypeError(
+        raise ArgumentTypeError(
             f"writer must be a stream writer (open/append/checkpoint/close), got "
             f"{type(writer).__name__}{hint}"
         )

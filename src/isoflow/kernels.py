@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._errors import InvalidBError, ParameterError, ShapeError
+from ._errors import ArgumentTypeError, InvalidBError, ParameterError, ShapeError
 
 if TYPE_CHECKING:
     from .algebras import Algebra
@@ -175,7 +175,7 @@ class CompiledB(Kernel):
     def __init__(self, f: Callable[..., None], args: tuple[Any, ...] = (), *,
                  name: str | None = None, raises: bool = True) -> None:  # fmt: skip
         if not _is_numba_dispatcher(f):
-            raise TypeError(
+            raise ArgumentTypeError(
                 "CompiledB needs a numba-compiled function: decorate it with "
                 f"@numba.njit(cache=True) (got {type(f).__name__})"
             )
@@ -186,16 +186,16 @@ class CompiledB(Kernel):
                 "@numba.njit(cache=True), or give the problem a Python B instead"
             )
         if not isinstance(args, tuple):
-            raise TypeError(f"CompiledB: args must be a tuple, got {type(args).__name__}")
+            raise ArgumentTypeError(f"CompiledB: args must be a tuple, got {type(args).__name__}")
         for k, a in enumerate(args):
             if isinstance(a, (tuple, list, dict)):
-                raise TypeError(
+                raise ArgumentTypeError(
                     f"CompiledB: args[{k}] is a {type(a).__name__}; give arrays and numbers "
                     "only (numba's threads cannot be handed a tuple nested in the arguments: "
                     "flatten it, e.g. (C, (a, b)) -> (C, a, b))"
                 )
         if not isinstance(raises, bool):
-            raise TypeError(f"CompiledB: raises must be True or False, got {raises!r}")
+            raise ArgumentTypeError(f"CompiledB: raises must be True or False, got {raises!r}")
         self.f = f
         self.args = args
         self.name: str = name or str(getattr(f, "__name__", "CompiledB"))

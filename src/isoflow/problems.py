@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._errors import InvalidBError, ParameterError
+from ._errors import ArgumentTypeError, InvalidBError, ParameterError
 from .algebras import Algebra
 from .kernels import Kernel
 from .noise import TransportNoise
@@ -101,29 +101,31 @@ class IsospectralProblem:
 
     def __post_init__(self) -> None:
         if not isinstance(self.algebra, Algebra):
-            raise TypeError(
+            raise ArgumentTypeError(
                 "algebra must be an isoflow Algebra (e.g. iso.algebras.so(3)), "
                 f"got {self.algebra!r}"
             )
         if self.kernel is not None:
             if not isinstance(self.kernel, Kernel):
-                raise TypeError(
+                raise ArgumentTypeError(
                     "kernel must be an isoflow kernel (iso.CompiledB(f), ElementwiseLinear, "
                     f"SpinNeighbourSum, PairwiseVortex) or None, got {self.kernel!r}"
                 )
             self.kernel.check(self.algebra)
         if self.noise is not None:
             if not isinstance(self.noise, TransportNoise):
-                raise TypeError(
+                raise ArgumentTypeError(
                     f"noise must be an iso.noise.TransportNoise or None, got {self.noise!r}"
                 )
             self.noise.check(self.algebra)
         if self.B is None:
             if self.kernel is None:
-                raise TypeError("give B, or a kernel (e.g. iso.CompiledB(f)) to derive it from")
+                raise ArgumentTypeError(
+                    "give B, or a kernel (e.g. iso.CompiledB(f)) to derive it from"
+                )
             object.__setattr__(self, "B", self.kernel.python_B(self.algebra))
         if not callable(self.B):
-            raise TypeError(f"B must be callable, got {type(self.B).__name__}")
+            raise ArgumentTypeError(f"B must be callable, got {type(self.B).__name__}")
         self._check_split_parts()
         self._check_diagnostic_functions()
 
@@ -351,7 +353,7 @@ class IsospectralProblem:
         """
         dagger = getattr(algebra, "dagger", None)
         if dagger is None:
-            raise TypeError(f"{algebra.name} does not define the dagger map needed for B")
+            raise ArgumentTypeError(f"{algebra.name} does not define the dagger map needed for B")
 
         def B(W: Array) -> Array:
             return dagger(gradient(W))

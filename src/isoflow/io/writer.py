@@ -23,6 +23,7 @@ import json
 import math
 import os
 import stat
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -136,6 +137,10 @@ class HDF5Writer:
         self.path = Path(path)
         self.force = bool(force)
         self._target = check_target(self.path, force=self.force)
+        if config is not None and not isinstance(config, Mapping):
+            raise ParameterError(
+                f"config must be a mapping (a dict) or None, got {type(config).__name__}"
+            )
         self.config = {} if config is None else dict(config)
         try:
             json.dumps(self.config)  # fail early on anything that is not JSON
