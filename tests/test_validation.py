@@ -348,3 +348,21 @@ def test_states_too_large_for_memory_are_parameter_errors() -> None:
     huge = np.broadcast_to(y0, (10**9, 5, 5))  # a view: no memory until it is copied
     with pytest.raises(iso.ParameterError, match=r"the y0 \(an ensemble of shape"):
         iso.solve(prob, iso.IsoMP(), huge, dt=0.1, n_steps=2)
+
+
+@pytest.mark.parametrize("batch", [(), (3,)], ids=["one system", "ensemble"])
+def test_an_explicit_method_whose_state_turns_nan_raises_convergence_error(batch) -> None:  # type: ignore[no-untyped-def]
+    """One exception type for one failure, whatever the ensemble: ConvergenceError with the
+    reason "non_finite" (an ensemble used to raise NonFiniteError)."""
+    alg = iso.algebras.so(5)
+    calls = [0]
+
+    def B(W):  # type: ignore[no-untyped-def]
+        calls[0] += 1
+        return -W * (np.nan if calls[0] > 40 else 1.0)
+
+    prob = iso.IsospectralProblem(B=B, algebra=alg)
+    y0 = alg.random(seed=0, batch=batch)
+    with pytest.raises(iso.ConvergenceError) as err:
+        iso.solve(prob, iso.RK4(), y0, dt=0.1, n_steps=100, progress=False)
+    assert err.value.reason == "non_finite" and 0 < err.value.step < 10  # 4 calls a step

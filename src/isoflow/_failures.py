@@ -197,8 +197,8 @@ def exception_for(
         exc: Exception = IsoflowError(message)
         exc.__cause__ = cause
         return exc
-    if failures.state_non_finite(m) and failures.residual[m] == 0:
-        return NonFiniteError(message)
+    # a state that turned non-finite under an explicit method (no residual) too: one type for
+    # one system and for an ensemble, with the reason "non_finite"
     return ConvergenceError(
         message,
         step=k,
