@@ -453,7 +453,7 @@ def run_state(o: Opened, cp: Checkpoint | None) -> tuple[str, str, bool]:
     if ri is None:
         return (
             "killed",
-            "stopped without closing (killed?); resume with isoflow run --resume",
+            "stopped without closing (killed, or a write failed); resume with isoflow run --resume",
             True,
         )
     status = ri.get("status")
