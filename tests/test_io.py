@@ -206,8 +206,11 @@ def test_xarray_and_netcdf_export(tmp_path: Path) -> None:
     back.close()
     with pytest.raises(iso.ResultFileError, match="is the result file being exported"):
         io.to_netcdf(path, path)  # replaced the result file by its export
-    with pytest.raises(iso.ResultFileError, match=r"b.nc exists \(use --force / force=True"):
+    with pytest.raises(iso.ResultFileError, match=r"b.nc exists \(use --force / force=True") as e:
         io.to_netcdf(path, tmp_path / "b.nc")
+    assert "--resume" not in str(e.value)  # an export cannot be resumed
+    with pytest.raises(iso.ParameterError, match="force must be True or False"):
+        io.to_netcdf(path, tmp_path / "b.nc", force="no")
     assert io.to_netcdf(path, tmp_path / "b.nc", force=True) == tmp_path / "b.nc"
     assert io.info(path)["complete"] and sorted(p.name for p in tmp_path.iterdir()) == [
         "b.h5",

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._errors import IsoflowError, ResultFileError
+from .._errors import IsoflowError, ParameterError, ResultFileError
 from ..diagnostics import Diagnostics, DiagnosticsAccumulator
 from ..problems import IsospectralProblem
 from .reader import RunData, load
@@ -79,7 +79,9 @@ def to_netcdf(
     src, dst = Path(path), Path(out)
     if dst.exists() and src.exists() and os.path.samefile(src, dst):
         raise ResultFileError(f"{dst} is the result file being exported; choose another name")
-    target = check_target(dst, force=bool(force))
+    if not isinstance(force, (bool, np.bool_)):
+        raise ParameterError(f"force must be True or False, got {force!r}")
+    target = check_target(dst, force=force, resumable=False)  # an export is not a run
     ds = to_xarray(path)
     tmp = target.with_name(f".{target.name}.partial")
     try:

@@ -42,8 +42,9 @@ __all__ = ["HDF5Writer", "check_target"]
 Array = NDArray[Any]
 
 
-def check_target(path: Path, *, force: bool) -> Path:
-    """The file a writer may create at ``path`` (a symlink's target), else an error.
+def check_target(path: Path, *, force: bool, resumable: bool = True) -> Path:
+    """The file a writer may create at ``path`` (a symlink's target), else an error (which
+    points to ``--resume`` for a ``resumable`` result file).
 
     Raises
     ------
@@ -64,10 +65,8 @@ def check_target(path: Path, *, force: bool) -> Path:
         kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
         raise ResultFileError(f"{path} exists and is {kind}; not replacing it")
     if not force:
-        raise ResultFileError(
-            f"{path} exists (use --force / force=True to replace it, or --resume {path} to "
-            "continue it)"
-        )
+        resume = f", or --resume {path} to continue it" if resumable else ""
+        raise ResultFileError(f"{path} exists (use --force / force=True to replace it{resume})")
     return target
 
 
