@@ -21,6 +21,15 @@ load on a shared machine only ever adds time).
     24), with one BLAS thread, what a single system runs with by default; also a step's time
     over its iterations (the start, the finish and the offsets spread over one to three
     iterations), and the planar 3M stage against the complex-tile stage it replaced there.
+    Measured alone on the idle machine (2026-11-27, ``python benchmarks/run_all.py --only
+    12``): 0.81, **0.77 and 0.68** at N = 256, 512, 1024 (4.9, 37 and 247 ms against 6.1, 48
+    and 365 ms); a step over its iterations 0.74, 0.82, 0.76; the planar stage 0.79, 0.88,
+    0.87 of the complex-tile one. The target 0.65 is missed: on one thread the three real
+    products and the three lower-triangle blocks reach about 4.5/8 of the flops of two complex
+    products but run at a lower rate than ``zgemm`` (the thin block products most), and
+    ``B(X)`` and the passes add 10-15 %. The earlier figures of this benchmark (1.26 and 1.04)
+    divided a step's time by its iterations with two BLAS threads, where the planar stage
+    scales worse than ``zgemm``.
 13. Iterations per step, Euler on the sphere (random smooth vorticity, ``h ||B||_2 = 0.3``,
     ``rtol = 1e-14``): IsoMP's default start (degree 6 below ``n = 1024``, on the offsets
     ``G(X) - W``), the cubic, quartic and degree-7 ones, Anderson mixing with the quartic and
