@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import importlib
 import json
@@ -344,3 +345,23 @@ def test_a_resume_writes_with_the_runs_recorded_chunk_rows_and_flush_interval(
         monkeypatch.undo()
         assert seen[-2:] == [(7, flush), (3, 0.5)]
     assert resume_module._writer_settings({}, None, None) == (256, 1.0)  # an older file
+
+
+def test_a_resume_with_other_diagnostics_is_refused_even_with_force(
+    tmp_path: Path, monkeypatch
+) -> None:  # type: ignore[no-untyped-def]
+    """A resumed run appends to the file's series: a model whose invariants or observables
+    are not the file's is refused with a one-line ResultFileError naming them (force=True used
+    to end in a KeyError), and the file is left as it was."""
+    path = tmp_path / "rb.h5"
+    _interrupted_run(path, monkeypatch)
+    _, problem, _, method, _ = _build()
+    renamed = dataclasses.replace(
+        problem, invariants={"spin": next(iter(problem.invariants.values()))}
+        if problem.invariants else {"spin": lambda W: W[..., 0, 1]},
+    )  # fmt: skip
+    before = path.read_bytes()
+    with pytest.raises(iso.ResultFileError, match=r"the model's diagnostics differ") as err:
+        io.resume(path, problem=renamed, method=method, force=True, progress=False)
+    assert "invariants/spin" in str(err.value) and "\n" not in str(err.value)
+    assert path.read_bytes() == before

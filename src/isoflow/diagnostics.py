@@ -95,6 +95,16 @@ class Diagnostics:
         return out
 
 
+def series_names(problem: IsospectralProblem) -> list[str]:
+    """The names of the series :func:`series` computes for ``problem`` (a result file's
+    ``diagnostics`` datasets)."""
+    names = ["casimirs", "distance"]
+    names += [k for k in ("hamiltonian", "lyapunov") if getattr(problem, k) is not None]
+    names += [f"invariants/{k}" for k in problem.invariants]
+    names += [f"observables/{k}" for k in problem.observables]
+    return names
+
+
 def series(problem: IsospectralProblem, ys: Array) -> dict[str, Array]:
     """Per-state diagnostic series of the states ``ys`` (time first): name -> array.
 

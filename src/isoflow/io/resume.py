@@ -42,13 +42,13 @@ from .._solve import (
     continue_run,
 )
 from .._time_loop import failure_fields
-from ..diagnostics import DiagnosticsAccumulator
+from ..diagnostics import DiagnosticsAccumulator, series_names
 from ..methods import Method
 from ..problems import IsospectralProblem
 from ..registry import ModelSpec, load_model
 from ..threads import ThreadRequest, plan_threads
 from .lock import WriteLock
-from .reader import Checkpoint, iter_rows, open_result, read_checkpoint, run_state
+from .reader import Checkpoint, Opened, iter_rows, open_result, read_checkpoint, run_state
 from .rebuild import rebuild_run
 from .recovery import recover
 from .writer import HDF5Writer, check_writer_settings
@@ -230,6 +230,7 @@ def resume(
                     acc.set_first_state(first)
                 acc.absorb(data["ts"], {k: data[k] for k in names[2:]})
             _check_model(p, meta, problem, first, force)
+            _check_series(o, problem)
             if ended:  # nothing to continue: the recorded run, the file untouched
                 return _recorded(problem, cp, t0, dt, n_steps, acc)
         chunk_rows, flush_seconds = _writer_settings(meta, chunk_rows, flush_seconds)
@@ -248,6 +249,30 @@ def resume(
         restart, writer=writer, accumulator=acc, progress=progress, throw=throw, threads=threads,
         status_every=status_every,
     )  # fmt: skip
+
+
+def _check_series(o: Opened, problem: IsospectralProblem) -> None:
+    """The file's diagnostic series are the problem's: a resumed run appends to them and
+    cannot add or drop one (even with ``force``)."""
+    recorded = {k for k in o.rows if k not in ("ts", "ys")}
+    expected = set(series_names(problem))
+    if recorded != expected:
+        what = "; ".join(
+            part
+            for part in (
+                "the file's " + ", ".join(sorted(recorded - expected))
+                if recorded - expected
+                else "",
+                "the model's " + ", ".join(sorted(expected - recorded))
+                if expected - recorded
+                else "",
+            )
+            if part
+        )
+        raise o.fail(
+            f"the model's diagnostics differ from the file's ({what}): a resumed run appends to "
+            "the file's series and cannot change them; start a new run"
+        )
 
 
 def _recorded(
