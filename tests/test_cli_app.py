@@ -162,6 +162,37 @@ def test_plot_has_no_empty_panel_without_a_hamiltonian(tmp_path: Path) -> None:
     assert len(titles) == 4 and "Hamiltonian variation" in titles
 
 
+def test_plot_of_an_ensemble_draws_one_member_named_in_the_title(tmp_path: Path) -> None:
+    """Each curve is that member's (its Casimirs C_1..C_k, not the members' flattened); a
+    failed ensemble says so in the title; a member out of range is a one-line error."""
+    import numpy as np
+
+    import isoflow as iso
+    from isoflow import io, plotting
+
+    prob, _ = iso.models.rigid_body(4)
+    Y = iso.algebras.so(4).random(seed=1, batch=(3,), scale=0.3)
+    Y[1] *= 400.0  # h ||B|| far above 2: member 1 fails at its first step
+    path = tmp_path / "ens.h5"
+    iso.solve(prob, iso.IsoMP(), Y, dt=0.1, n_steps=30, writer=io.HDF5Writer(path),
+              throw=False, progress=False)  # fmt: skip
+    run = io.load(path)
+    fig = plotting.plot_run(run, member=2)
+    assert "member 2 of 3" in fig._suptitle.get_text() and "failed" in fig._suptitle.get_text()
+    casimirs = next(ax for ax in fig.axes if ax.get_title().startswith("Casimir"))
+    assert casimirs.get_legend_handles_labels()[1] == [f"$C_{{{j}}}$" for j in range(1, 5)]
+    C = np.real(run.series["casimirs"])[:, 2]
+    drawn = np.stack([line.get_ydata() for line in casimirs.lines], axis=1)
+    scale = np.max(np.abs(C - C[:1])) / np.max(np.abs(drawn))  # the axis' power of ten
+    assert np.allclose(drawn * scale, C - C[:1], rtol=1e-6, atol=1e-18)
+    out = tmp_path / "m.png"
+    assert cli.main(["plot", str(path), "--out", str(out), "--member", "0"]) == 0
+    bad = run_cli("plot", str(path), "--out", str(tmp_path / "x.png"), "--member", "3")
+    assert bad.returncode == 1 and "not a member of this ensemble of shape (3,)" in (
+        one_error_line(bad.stderr)
+    )
+
+
 def test_parser_names_come_from_the_registry() -> None:
     parser = cli.build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices

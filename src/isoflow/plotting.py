@@ -31,12 +31,16 @@ def plot_experiment(res: ExperimentResult) -> Figure:
     return figure(res)  # type: ignore[no-any-return]
 
 
-def _title(run: Any) -> str:
+def _title(run: Any, member: str = "") -> str:
     cfg, meta = run.config, run.meta
     params = ", ".join(f"{k} = {v}" for k, v in (cfg.get("params") or {}).items())
     title = f"{cfg.get('model', 'run')}" + (f" ({params})" if params else "")
-    title += f": {meta.get('method')}, dt = {meta.get('dt'):g}"
-    title += "" if run.complete else " (incomplete)"
+    title += f": {meta.get('method')}, dt = {meta.get('dt'):g}" + member
+    info = run.run_info if isinstance(run.run_info, dict) else {}
+    if info.get("status") == 1:
+        title += " (failed: see its message)"
+    elif not run.complete:
+        title += " (incomplete)"
     # long parameter lists wrap between parameters (no-break spaces keep "k = v" together),
     # instead of running off both edges of the figure
     return textwrap.fill(title.replace(" = ", "\u00a0=\u00a0"), width=110)
@@ -50,7 +54,7 @@ def _component(run: Any, idx: tuple[int, ...]) -> str:
     return f"W[{', '.join(map(str, idx))}]"
 
 
-def plot_run(run: Any) -> Figure:
+def plot_run(run: Any, member: int | tuple[int, ...] | None = None) -> Figure:
     """Invariants and state components of a result file (:class:`isoflow.io.RunData`).
 
     Panels: Casimir variation; Hamiltonian (or Lyapunov function) variation, when the problem
@@ -58,12 +62,26 @@ def plot_run(run: Any) -> Figure:
     state components in time. Every curve is labelled; small variations are scaled by a power
     of ten named in the axis label.
 
+    Parameters
+    ----------
+    run : isoflow.io.RunData
+        The file's contents, :func:`isoflow.io.load`.
+    member : int or tuple of int, optional
+        For an ensemble: the member drawn (its index, flat or one per ensemble axis; default
+        0), named in the title. A figure shows one member; draw others by calling again.
+
+    Raises
+    ------
+    ParameterError
+        ``member`` for a single system, or out of the ensemble's range.
+
     A run of a forced or dissipative sphere model adds a row of diagnostics (each panel when
     its series is in the file): the energy budget (injection and dissipation rates against
     :math:`dE/dt` from the saved energy), the enstrophy budget's rates, the energy spectrum
     at up to six saves, the energy transfer spectrum (the bracket's; first and last save)
     and, for the quasi-geostrophic model, the zonal-mean wind against latitude over time.
     """
+    run, which = _one_member(run, member)
     ts, s = run.ts, run.series
     energy = "hamiltonian" in s or "lyapunov" in s
     extra = _diagnostic_panels(s)
@@ -90,8 +108,51 @@ def plot_run(run: Any) -> Figure:
     for group in extra:
         for key in group:
             drawers[key](axes[key], ts, s)
-    fig.suptitle(_title(run))
+    fig.suptitle(_title(run, which))
     return fig
+
+
+def _one_member(run: Any, member: int | tuple[int, ...] | None) -> tuple[Any, str]:
+    """``(run, words)``: an ensemble's run cut to one member (its states and series, with
+    ``words`` naming it for the title), a single system's as it is."""
+    import dataclasses
+
+    from ._errors import ParameterError
+
+    state = tuple(run.meta.get("state_shape", np.shape(run.ys)[1:]))
+    core = tuple(run.meta.get("core_shape", state))
+    batch = state[: len(state) - len(core)]
+    if not batch:
+        if member is not None:
+            raise ParameterError(f"member={member!r}: this run is one system, not an ensemble")
+        return run, ""
+    size = int(np.prod(batch))
+    try:
+        if member is None:
+            index: tuple[int, ...] = (0,) * len(batch)
+        elif isinstance(member, (int, np.integer)) and not isinstance(member, bool):
+            if not 0 <= int(member) < size:
+                raise ValueError
+            index = tuple(int(i) for i in np.unravel_index(int(member), batch))
+        else:
+            index = tuple(int(i) for i in member)  # type: ignore[union-attr]
+            if len(index) != len(batch) or not all(
+                0 <= i < n for i, n in zip(index, batch, strict=True)
+            ):
+                raise ValueError
+    except (TypeError, ValueError):
+        raise ParameterError(
+            f"member={member!r} is not a member of this ensemble of shape {batch}: give an "
+            f"index below {size} or a tuple of {len(batch)} indices"
+        ) from None
+    cut: tuple[Any, ...] = (slice(None), *index)
+    one = dataclasses.replace(
+        run, ys=np.asarray(run.ys)[cut],
+        series={k: np.asarray(v)[cut] for k, v in run.series.items()},
+        meta={**run.meta, "state_shape": list(core)},
+    )  # fmt: skip
+    label = index[0] if len(index) == 1 else index
+    return one, f", member {label} of {size}"
 
 
 def _diagnostic_panels(s: dict[str, Any]) -> list[list[str]]:
