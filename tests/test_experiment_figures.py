@@ -88,3 +88,16 @@ def test_the_euler_sphere_spectrum_axis_spans_the_data(
     drawn = drawn[np.isfinite(drawn)]
     low, high = ax.get_ylim()
     assert low == pytest.approx(drawn.min() / 3) and high == pytest.approx(drawn.max() * 3)
+
+
+def test_a_spectrum_with_nan_is_refused_whatever_its_place() -> None:
+    """A NaN spectrum used to blank every curve of the axes when drawn first (the axis scale
+    came from its maximum), and to draw nothing silently when drawn last."""
+    import numpy as np
+
+    good = 1.0 / np.arange(1, 11) ** 3
+    bad = good.copy()
+    bad[4] = np.nan
+    for spectra in ({"bad": bad, "good": good}, {"good": good, "bad": bad}):
+        with pytest.raises(iso.NonFiniteError, match="spectrum 'bad' must be finite"):
+            iso.sphere.plot_energy_spectrum(spectra)

@@ -388,6 +388,8 @@ def draw_energy_spectrum(
     ------
     ShapeError
         A spectrum that is not one vector (or one matrix), or an empty one.
+    NonFiniteError
+        A spectrum with NaN or Inf.
     """
     curves = [(label, _spectrum(label, d)) for label, d in spectra.items()]
     if not curves:
@@ -420,13 +422,17 @@ def _spectrum(label: str, data: ArrayLike) -> Array:
             raise ShapeError(
                 f"spectrum {label!r}: a vorticity matrix must have shape (N, N), got {arr.shape}"
             )
-        return np.asarray(energy_spectrum(arr), dtype=float)
-    if arr.dtype.kind not in "iuf" or arr.ndim != 1 or arr.size == 0:
+        E = np.asarray(energy_spectrum(arr), dtype=float)
+    elif arr.dtype.kind not in "iuf" or arr.ndim != 1 or arr.size == 0:
         raise ShapeError(
             f"spectrum {label!r}: give E_l for l = 1..lmax as a non-empty real vector, got "
             f"shape {arr.shape} of dtype {arr.dtype}"
         )
-    return arr.astype(float)
+    else:
+        E = arr.astype(float)
+    if not np.all(np.isfinite(E)):  # it would blank every curve of the axes (their scale)
+        raise NonFiniteError(f"spectrum {label!r} must be finite (found NaN or Inf)")
+    return E
 
 
 def plot_energy_spectrum(
