@@ -493,7 +493,9 @@ def test_errors_are_typed() -> None:
     with pytest.raises(iso.ParameterError):
         sphere.to_coefficients(np.zeros((4, 4), complex), lmax=4)
     with pytest.raises(iso.ShapeError):
-        sphere.analyze(np.zeros((5, 9)), 6)  # grid too coarse for degree 6
+        sphere.analyze(np.zeros((5, 9)), 6, geometry="GL")  # grid too coarse for degree 6
+    with pytest.raises(TypeError, match="geometry"):  # no default: another grid's values
+        sphere.analyze(np.zeros((16, 33)), 6)  # would give wrong coefficients silently
     with pytest.raises(iso.ParameterError):
         sphere.synthesize(np.zeros(3), geometry="HEALPix")
     with pytest.raises(iso.ParameterError):

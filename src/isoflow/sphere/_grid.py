@@ -156,9 +156,9 @@ def synthesize(
     return out.reshape(*arr.shape[:-1], ntheta, nphi)
 
 
-def analyze(values: ArrayLike, lmax: int, *, geometry: str = "GL", nthreads: int = 1) -> Array:
+def analyze(values: ArrayLike, lmax: int, *, geometry: str, nthreads: int = 1) -> Array:
     r"""Real coefficients :math:`\omega_{lm}`, ``1 <= l <= lmax``, of values on a ``ducc0``
-    grid (the inverse of :func:`synthesize` for band-limited data).
+    grid (the inverse of :func:`synthesize` on the same ``geometry``, for band-limited data).
 
     Exact for functions of degree ``<= lmax`` when the grid is fine enough: Gauss–Legendre
     needs ``ntheta >= lmax + 1``, Clenshaw–Curtis ``ntheta >= lmax + 2`` (ducc0 upsamples
@@ -169,8 +169,12 @@ def analyze(values: ArrayLike, lmax: int, *, geometry: str = "GL", nthreads: int
     ----------
     values : array_like, shape (*batch, ntheta, nphi)
     lmax : int
-    geometry : {"GL", "CC", "F1"}
-        The grid the values are given on (default Gauss–Legendre).
+    geometry : {"CC", "GL", "F1"}
+        The grid the values are given on (required: values on another grid give wrong
+        coefficients without any error; :func:`synthesize` and :func:`grid` default to
+        ``"CC"``).
+    nthreads : int
+        ``ducc0`` threads (default 1).
 
     Returns
     -------
