@@ -204,6 +204,8 @@ def test_xarray_and_netcdf_export(tmp_path: Path) -> None:
     back = xr.open_dataset(nc, engine="h5netcdf")
     assert np.array_equal(back["y_real"].values, ds["y_real"].values)
     assert json.loads(back.attrs["config"])["model"] == "brockett"
+    assert json.loads(back.attrs["run_info"])["status"] == 0
+    assert json.loads(back.attrs["drifts"]) == run.drifts
     back.close()
     with pytest.raises(iso.ResultFileError, match="is the result file being exported"):
         io.to_netcdf(path, path)  # replaced the result file by its export
@@ -212,6 +214,8 @@ def test_xarray_and_netcdf_export(tmp_path: Path) -> None:
     assert "--resume" not in str(e.value)  # an export cannot be resumed
     with pytest.raises(iso.ParameterError, match="force must be True or False"):
         io.to_netcdf(path, tmp_path / "b.nc", force="no")
+    with pytest.raises(iso.ResultFileError, match=r"no directory .*nodir to write it in"):
+        io.to_netcdf(path, tmp_path / "nodir" / "b.nc")
     assert io.to_netcdf(path, tmp_path / "b.nc", force=True) == tmp_path / "b.nc"
     assert io.info(path)["complete"] and sorted(p.name for p in tmp_path.iterdir()) == [
         "b.h5",
@@ -365,3 +369,23 @@ def test_a_resume_with_other_diagnostics_is_refused_even_with_force(
         io.resume(path, problem=renamed, method=method, force=True, progress=False)
     assert "invariants/spin" in str(err.value) and "\n" not in str(err.value)
     assert path.read_bytes() == before
+
+
+def test_an_ensembles_export_shares_its_member_dimension(tmp_path: Path) -> None:
+    """Every variable of an ensemble's export has the member axis as ``member`` (selectable
+    across variables), the values equal the file's, and a failed run's status is kept."""
+    pytest.importorskip("xarray")
+    prob, _ = iso.models.rigid_body(4)
+    Y = iso.algebras.so(4).random(seed=1, batch=(3,), scale=0.3)
+    Y[1] *= 400.0  # h ||B|| far above 2: member 1 fails at its first step
+    path = tmp_path / "e.h5"
+    iso.solve(prob, iso.IsoMP(), Y, dt=0.1, n_steps=20, writer=io.HDF5Writer(path),
+              throw=False, progress=False)  # fmt: skip
+    ds, run = io.to_xarray(path), io.load(path)
+    assert ds["y"].dims == ("time", "member", "y_dim0", "y_dim1")
+    assert ds["casimirs"].dims == ("time", "member", "casimirs_dim0")
+    assert ds["hamiltonian"].dims == ("time", "member")
+    assert np.array_equal(ds["y"].sel(member=2).values, run.ys[:, 2])
+    assert np.array_equal(ds["hamiltonian"].values, run.series["hamiltonian"])
+    info = json.loads(ds.attrs["run_info"])
+    assert info["status"] == 1 and "(1,)" in info["message"]

@@ -28,18 +28,33 @@ def to_xarray(path: str | os.PathLike[str]) -> Any:
     """The valid saved states and diagnostics of a result file as an :class:`xarray.Dataset`.
 
     Variables: ``y`` (or ``y_real``/``y_imag`` for complex states, so that netCDF can hold
-    them) with dimensions ``("time", "dim_0", ...)`` and the diagnostic series; attributes
-    ``config`` and ``meta`` as JSON strings.
+    them) and the diagnostic series (``casimirs``, ``hamiltonian``, ``invariants_<name>``,
+    ...). Dimensions: ``time`` first; for an ensemble its axes next, shared by every variable
+    (``member`` for one axis, ``member_0``, ``member_1``, ... for more, as
+    :func:`isoflow.sweep.open_sweep`); then each variable's own (``y_dim0``, ...,
+    ``casimirs_dim0``, ...). Attributes (JSON strings): ``config``, ``meta``, ``run_info``
+    (status, message and statistics of the call that ended the run; ``null`` if it was
+    killed) and ``drifts``; ``isoflow_step``, the steps behind the last saved state.
+
+    Parameters
+    ----------
+    path : str or Path
+        A result file.
     """
     try:
         import xarray as xr
     except ImportError as exc:  # pragma: no cover - optional dependency
         raise IsoflowError("to_xarray needs xarray: pip install 'isoflow[xarray]'") from exc
     run = load(path)
+    state = tuple(run.meta.get("state_shape", run.ys.shape[1:]))
+    core = tuple(run.meta.get("core_shape", state))
+    nbatch = len(state) - len(core)
+    members = ["member"] if nbatch == 1 else [f"member_{i}" for i in range(nbatch)]
     data_vars: dict[str, Any] = {}
 
     def add(name: str, arr: Array) -> None:
-        dims = ("time", *(f"{name}_dim{i}" for i in range(arr.ndim - 1)))
+        own = (f"{name}_dim{i}" for i in range(arr.ndim - 1 - nbatch))
+        dims = ("time", *members, *own)
         if np.iscomplexobj(arr):
             data_vars[f"{name}_real"] = (dims, arr.real)
             data_vars[f"{name}_imag"] = (dims, arr.imag)
@@ -55,6 +70,8 @@ def to_xarray(path: str | os.PathLike[str]) -> Any:
         attrs={
             "config": json.dumps(run.config),
             "meta": json.dumps(run.meta),
+            "run_info": json.dumps(run.run_info),
+            "drifts": json.dumps(run.drifts),
             "isoflow_step": run.step,
         },
     )
@@ -82,6 +99,8 @@ def to_netcdf(
     if not isinstance(force, (bool, np.bool_)):
         raise ParameterError(f"force must be True or False, got {force!r}")
     target = check_target(dst, force=force, resumable=False)  # an export is not a run
+    if not target.parent.is_dir():  # not created: a mistyped path
+        raise ResultFileError(f"{dst}: no directory {target.parent} to write it in")
     ds = to_xarray(path)
     tmp = target.with_name(f".{target.name}.partial")
     try:
