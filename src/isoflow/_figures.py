@@ -52,12 +52,17 @@ def save(fig: Figure, path: str | os.PathLike[str], *, force: bool = False) -> P
 
     Parameters
     ----------
+    fig : matplotlib.figure.Figure
+    path : str or Path
+        The image file; its directory must exist.
     force : bool
         Replace an existing file. Only a regular file is ever replaced (never a directory, a
         device or another special file).
 
     Raises
     ------
+    ParameterError
+        ``force`` that is not a bool.
     ValueError
         Another suffix.
     FileExistsError

@@ -182,6 +182,8 @@ class ModalLinearPart(LinearPart):
     rates : array_like, shape (r,)
         :math:`c_j \ge 0`.
 
+    Notes
+    -----
     Its flow costs ``2 r`` passes over the state: fine for small spaces; the sphere has its own
     per-diagonal part (:class:`isoflow.sphere.SphereDissipation`).
     """
@@ -322,6 +324,8 @@ class StochasticForcing:
         The noise seed: member ``m`` of a run draws with the key ``(seed, m)`` at every step,
         the same in a resumed or split run (:mod:`isoflow.noise`).
 
+    Notes
+    -----
     The mean rate of energy injected into mode ``j`` in a pairing where the energy is
     :math:`\frac12\sum_j w_j^2/\lambda_j` is :math:`\frac12\sigma_j^2/\lambda_j` (Itô).
     """

@@ -184,6 +184,10 @@ def euler_sphere(
         ``hyperviscosity=(nu_p, p)`` with ``p >= 1``: the linear part
         :class:`~isoflow.sphere.SphereDissipation` with the rates
         :math:`c_l = \nu l(l+1) + \nu_p (l(l+1))^p + \alpha`, applied exactly per degree.
+        With dissipation or forcing the problem has a linear part and forcing terms, and runs
+        with the split method :class:`~isoflow.Strang` (``iso.Strang()``); its diagnostics
+        then include the energy and enstrophy budgets and spectra
+        (:mod:`isoflow.models._forced`).
     forcing : matrix, iso.Forcing, iso.StochasticForcing or a list, optional
         Forcing of the relative vorticity: a matrix in ``su(N)`` (steady), an
         :class:`~isoflow.Forcing` (time-dependent amplitudes), white noise on a band of degrees
@@ -198,10 +202,6 @@ def euler_sphere(
         Casimir is kept (the flow stays isospectral; IsoMP integrates it as it is). The
         problem's ``lyapunov`` is then :math:`-E` (the diagnostics report any increase of the
         energy) and the angular momentum, which it changes, is an observable.
-
-    With dissipation or forcing the problem has a linear part and forcing terms, and runs with
-    the split method :class:`~isoflow.Strang` (``iso.Strang()``); its diagnostics then include
-    the energy and enstrophy budgets and spectra (:mod:`isoflow.models._forced`).
     noise : float or array_like, optional
         Stratonovich transport noise on the large scales: a number :math:`\sigma` gives the
         eight fields of the stream functions :math:`\sigma Y_{lm}`, ``l = 1, 2``

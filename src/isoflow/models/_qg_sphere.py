@@ -204,7 +204,7 @@ def qg_sphere(
         :func:`~isoflow.models.euler_sphere`.
     deformation_radius : float or None
         The Helmholtz variant: :math:`\kappa = 1/L_d` (``None``: :math:`\kappa = 0`).
-    viscosity, hyperviscosity, drag, forcing :
+    viscosity, hyperviscosity, drag, forcing, forcing_band, energy_rate, forcing_seed :
         Dissipation and forcing of the relative potential vorticity, as in
         :func:`~isoflow.models.euler_sphere` (integrate with :class:`~isoflow.Strang`).
 

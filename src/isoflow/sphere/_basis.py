@@ -184,6 +184,8 @@ def basis_matrix(N: int, l: int, m: int, *, kind: str = "real") -> Array:
         :mod:`isoflow.sphere`): :math:`(T_{l,-m} + (-1)^m T_{lm})/\sqrt2` for ``m > 0``,
         :math:`T_{l0}`, and :math:`i(T_{l,-|m|} - (-1)^m T_{l|m|})/\sqrt2` for ``m < 0``.
 
+    Notes
+    -----
     Both are normalized by :math:`\frac{4\pi}{N}\operatorname{Tr}(T^\dagger T) = 1`.
     """
     N = check_N(N, minimum=1)

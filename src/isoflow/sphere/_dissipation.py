@@ -149,6 +149,8 @@ class SphereDissipation(LinearPart):
     rates : array_like, shape (N,)
         :math:`c_l \ge 0` for ``l = 0..N-1`` (:func:`degree_rates`).
 
+    Notes
+    -----
     Its modes (for stochastic forcing) are the real harmonics :math:`iT^{\mathrm r}_{lm}`,
     numbered as the coefficients (:func:`~isoflow.sphere.lm_index`, ``l >= 1``).
     """

@@ -221,6 +221,8 @@ def evaluate(
         One set of coefficients.
     colatitude, longitude : array_like
         Broadcast together; radians, colatitude in :math:`[0, \pi]`.
+    nthreads : int
+        ``ducc0`` threads (default 1).
 
     Returns
     -------

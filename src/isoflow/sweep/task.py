@@ -45,21 +45,29 @@ Array = Any
 
 
 def build_member(
-    spec: SweepSpec, member: Member, _made: dict[str, tuple[Any, Any]] | None = None
+    spec: SweepSpec, member: Member, *, cache: dict[str, tuple[Any, Any]] | None = None
 ) -> tuple[Any, Array]:
     """``(problem, y0)`` of one member: the model's, then perturbed if the sweep says so.
 
     With ``perturb = eps`` the initial state is ``project(y0 + eps |y0| R / |R|)`` where ``R``
     is a random element of the space drawn from the member's seed (norms are Frobenius norms
     over all entries).
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    member : Member
+    cache : dict, optional
+        Models built so far, by their parameters: members that differ only in the
+        perturbation's seed share one (filled as models are built).
     """
     key = canonical_json(member.params)
-    if _made is not None and key in _made:  # members differing only in the perturbation seed
-        problem, y0 = _made[key]
+    if cache is not None and key in cache:  # members differing only in the perturbation seed
+        problem, y0 = cache[key]
     else:
         problem, y0 = spec.model_spec().make(member.params)
-        if _made is not None:
-            _made[key] = (problem, y0)
+        if cache is not None:
+            cache[key] = (problem, y0)
     y0 = np.array(y0)
     if spec.perturb is not None:
         alg = problem.algebra
@@ -104,7 +112,7 @@ def build_task(spec: SweepSpec, task: Task) -> tuple[Any, Array, Any, dict[str, 
     # the sweep's own initial-data names (the model's are declared by the model and trusted)
     declared = set(spec.initial) - set(spec.model_spec().initial)
     for m in task.members:
-        p, y0 = build_member(spec, m, made)
+        p, y0 = build_member(spec, m, cache=made)
         if problem is None:
             problem, first = p, m
         elif p is not problem and any(first.params.get(k) != m.params.get(k) for k in declared):
