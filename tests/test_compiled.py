@@ -432,6 +432,17 @@ def test_compiled_b_is_checked() -> None:
     bad = iso.IsospectralProblem(algebra=alg, kernel=iso.CompiledB(uk.returns_nothing_useful))
     with pytest.raises(iso.InvalidBError, match="does not compile"):
         iso.solve(bad, IsoMP(), alg.random(0), dt=0.1, n_steps=2)
+    # the reason numba gives, not its first line (which names only its compiler stage)
+    for kernel, reason in (
+        (iso.CompiledB(uk.writes_complex_into_real, (1.0 + 1j,)),
+         r"found for signature: setitem\(array\(float64, 2d, C\), .*complex128\)"),
+        (iso.CompiledB(uk.declared_any_layout), r"compilation disabled \(f was compiled for an "
+                                                r"explicit signature.*float64\[:, ::1\]"),
+    ):  # fmt: skip
+        prob = iso.IsospectralProblem(algebra=alg, kernel=kernel)
+        with pytest.raises(iso.InvalidBError, match=reason) as err:
+            iso.solve(prob, IsoMP(), alg.random(0), dt=0.1, n_steps=2)
+        assert "Failed in" not in str(err.value) and "\n" not in str(err.value)
     # a kernel that is not the problem's B is caught before the run
     C = np.ones((4, 4))
     wrong = iso.IsospectralProblem(

@@ -122,3 +122,17 @@ def cubic_problem(alg: iso.algebras.Algebra, seed: int = 0, scale: float = 1.0):
     C = scale * (0.5 * (A - A.T) if symmetric_space else 0.5 * (A + A.T))
     kernel = iso.CompiledB(cubic_elementwise, (C,))
     return iso.IsospectralProblem(B=cubic_elementwise_numpy(C), algebra=alg, kernel=kernel)
+
+
+@numba.njit(cache=True)
+def writes_complex_into_real(W, out, c):  # type: ignore[no-untyped-def]
+    """A user error numba only finds when typing: a complex value into a real ``out``."""
+    for i in range(W.shape[0]):
+        for j in range(W.shape[1]):
+            out[i, j] = c * W[i, j]
+
+
+@numba.njit("void(float64[:, :], float64[:, :])", cache=True)
+def declared_any_layout(W, out):  # type: ignore[no-untyped-def]
+    """An explicit signature without C-contiguity: compiled loops cannot call this one."""
+    out[...] = -W

@@ -57,7 +57,7 @@ def field_type(f: Any, args: tuple[Any, ...], dtype: Any, out_dtype: Any, ndim: 
     try:
         f.compile(sig)
     except Exception as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        first = _numba_reason(exc)
         raise InvalidBError(
             f"the kernel function {name} does not compile for f(W, out, *args) with W: "
             f"{W_t}, out: {out_t}, args: {args_t}: {first}"
@@ -68,6 +68,29 @@ def field_type(f: Any, args: tuple[Any, ...], dtype: Any, out_dtype: Any, ndim: 
             "nopython functions: decorate it with @numba.njit(cache=True)"
         )
     return types.FunctionType(sig)
+
+
+def _numba_reason(exc: BaseException) -> str:
+    """The line of a numba compile error that says what is wrong: numba's first line names
+    only the compiler stage ("Failed in nopython mode pipeline ..."), the reason follows; an
+    explicit signature that does not match says "compilation disabled"."""
+    text = str(exc).strip()
+    if not text:
+        return type(exc).__name__
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    useful = [
+        ln for ln in lines
+        if not ln.startswith(("Failed in ", "During: ", "File ", "^", "<source", "- Resolution"))
+    ]  # fmt: skip
+    reason = useful[0] if useful else lines[0]
+    if reason.endswith(":") and len(useful) > 1:  # "... found for signature:" and the signature
+        reason += " " + useful[1].lstrip("> ")
+    if "compilation disabled" in text:
+        reason += (
+            " (f was compiled for an explicit signature; compiled loops call it with "
+            "C-contiguous arrays, e.g. float64[:, ::1]: drop the signature or declare those)"
+        )
+    return " ".join(reason.split())[:400]
 
 
 def _apply(f, args, W, out):  # type: ignore[no-untyped-def]

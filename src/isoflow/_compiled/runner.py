@@ -475,9 +475,15 @@ class CompiledRunner(Runner):
                 self._set_arrays(slice(m, m + 1), tuple(a[m : m + 1] for a in before))
             self._isolate(undone, nsteps, grid, buf)
         elif undone.size or raised is not None:
+            why = (
+                "; a field declared raises=False raised on a numba thread, which drops its "
+                "exception: run with raises=True (the default) or on one thread to see it"
+                if before is None and raised is not None and self._drive is not None
+                else ""
+            )
             raise IsoflowError(
                 f"the compiled loop stopped {undone.size} member(s) in the middle of a chunk "
-                f"without a result ({raised!r}); the run cannot go on"
+                f"without a result ({raised!r}); the run cannot go on{why}"
             ) from raised
         if out.shape[0] and not np.may_share_memory(out, buf):
             out[...] = self.layout.rows_from_flat(buf)
