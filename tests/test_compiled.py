@@ -443,6 +443,12 @@ def test_compiled_b_is_checked() -> None:
         with pytest.raises(iso.InvalidBError, match=reason) as err:
             iso.solve(prob, IsoMP(), alg.random(0), dt=0.1, n_steps=2)
         assert "Failed in" not in str(err.value) and "\n" not in str(err.value)
+    # a field that modifies its state: named as such, not as a kernel/B or broadcasting slip
+    C4 = np.ones((4, 4))
+    moving = iso.IsospectralProblem(algebra=alg, kernel=iso.CompiledB(uk.modifies_its_state, (C4,)))
+    for y0 in (alg.random(0), alg.random(0, batch=(3,))):
+        with pytest.raises(iso.InvalidBError, match="gives other values for the same state"):
+            iso.solve(moving, IsoMP(), y0, dt=0.1, n_steps=2)
     # a kernel that is not the problem's B is caught before the run
     C = np.ones((4, 4))
     wrong = iso.IsospectralProblem(

@@ -136,3 +136,13 @@ def writes_complex_into_real(W, out, c):  # type: ignore[no-untyped-def]
 def declared_any_layout(W, out):  # type: ignore[no-untyped-def]
     """An explicit signature without C-contiguity: compiled loops cannot call this one."""
     out[...] = -W
+
+
+@numba.njit(cache=True)
+def modifies_its_state(W, out, C):  # type: ignore[no-untyped-def]
+    """A user error: ``B = C * W``, and ``W`` scaled in place (each call sees another W)."""
+    n = W.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = -C[i, j] * W[i, j]
+            W[i, j] *= 1.0 + 1e-6

@@ -116,6 +116,7 @@ class Kernel:
             return self.evaluate(W, algebra)
 
         B.__qualname__ = B.__name__ = f"B from {self.name}"
+        B.isoflow_kernel = self  # type: ignore[attr-defined]  # B is this kernel's own
         return B
 
 

@@ -269,6 +269,12 @@ class IsospectralProblem:
             fast = np.asarray(self.kernel.evaluate(W, alg))
             gap = float(np.max(np.abs(fast - outc))) if fast.shape == outc.shape else np.inf
             if not gap <= 1e-12 * max(1.0, float(np.max(np.abs(outc)))):
+                if getattr(self.B, "isoflow_kernel", None) is self.kernel:  # B is the kernel's
+                    raise InvalidBError(
+                        f"the kernel {getattr(self.kernel, 'name', '')} gives other values for "
+                        f"the same state (by {gap:.3e}): its function must depend on W and its "
+                        "arguments only, and must not modify them"
+                    )
                 raise InvalidBError(
                     f"the problem's kernel {type(self.kernel).__name__} does not describe its B: "
                     f"they differ by {gap:.3e} at the initial state (the compiled fast path would "
@@ -311,6 +317,12 @@ class IsospectralProblem:
             scale = max(1.0, float(np.max(np.abs(alone))))
             if float(np.max(np.abs(got - alone))) <= 1e-10 * scale:
                 return
+            if getattr(self.B, "isoflow_kernel", None) is self.kernel:  # it runs member-wise
+                raise InvalidBError(
+                    f"the kernel {getattr(self.kernel, 'name', '')} gives other values for the "
+                    "same state: its function must depend on W and its arguments only, and must "
+                    "not modify them"
+                )
             what = "gives other values for its first member than for that state alone"
         else:
             for j, member in enumerate(W.reshape(-1, *alg.shape)):
