@@ -389,3 +389,18 @@ def test_an_ensembles_export_shares_its_member_dimension(tmp_path: Path) -> None
     assert np.array_equal(ds["hamiltonian"].values, run.series["hamiltonian"])
     info = json.loads(ds.attrs["run_info"])
     assert info["status"] == 1 and "(1,)" in info["message"]
+
+
+def test_a_run_larger_than_the_free_disk_is_warned_about(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Not refused (a run may be stopped early), but said before it starts: its saved states
+    need more than the disk's free space."""
+    import collections
+    import shutil
+
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 1000, 1000))
+    prob, W0 = iso.models.rigid_body(4)
+    with pytest.warns(UserWarning, match=r"saved states need about .* GiB, more than the"):
+        sol = iso.solve(prob, iso.IsoMP(), W0, dt=0.1, n_steps=40, progress=False,
+                        writer=io.HDF5Writer(tmp_path / "w.h5"))  # fmt: skip
+    assert sol.success  # 41 states of 128 bytes: it still fits, and runs

@@ -22,7 +22,9 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import stat
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -68,6 +70,28 @@ def check_target(path: Path, *, force: bool, resumable: bool = True) -> Path:
         resume = f", or --resume {path} to continue it" if resumable else ""
         raise ResultFileError(f"{path} exists (use --force / force=True to replace it{resume})")
     return target
+
+
+def _warn_if_the_disk_is_too_small(target: Path, meta: dict[str, Any]) -> None:
+    """Warn when the run's saved states alone need more than the free space beside ``target``:
+    it would stop with a :class:`~isoflow.ResultWriteError` when the disk fills (its file
+    keeps every state up to then and resumes). Not refused: a run may be meant to be stopped
+    early."""
+    try:
+        rows = int(meta["n_steps"]) // int(meta["save_every"]) + 1
+        row = int(np.prod(meta["state_shape"])) * np.dtype(meta["state_dtype"]).itemsize
+        free = shutil.disk_usage(target.parent).free
+    except (KeyError, TypeError, ValueError, OSError):
+        return
+    need = float(rows) * row
+    if need > free:
+        warnings.warn(
+            f"{target}: the run's saved states need about {need / 2**30:.3g} GiB, more than the "
+            f"{free / 2**30:.3g} GiB free there; it will stop with a ResultWriteError when the "
+            "disk fills (its file resumes): save less often (save_every) or free space",
+            UserWarning,
+            stacklevel=4,
+        )
 
 
 def check_writer_settings(chunk_rows: Any, flush_seconds: Any) -> None:
@@ -169,6 +193,7 @@ class HDF5Writer:
         self._lock = WriteLock(self._target)
         try:
             self._target = check_target(self.path, force=self.force)
+            _warn_if_the_disk_is_too_small(self._target, meta)
             self._partial = self._target.with_name(self._target.name + ".partial")
             self._sf = SafeFile(self._partial, create=True)
             self._f = h5py.File(self._sf, "w", libver="latest")
