@@ -193,6 +193,24 @@ def test_plot_of_an_ensemble_draws_one_member_named_in_the_title(tmp_path: Path)
     )
 
 
+def test_plot_names_the_fields_of_a_pair(tmp_path: Path) -> None:
+    """The heavy top's state is the pair (Gamma, M): its components are named so, not as two
+    particles w_0, w_1 (the file records the fields' names)."""
+    import isoflow as iso
+    from isoflow import io, plotting
+
+    prob, y0 = iso.models.heavy_top()
+    path = tmp_path / "top.h5"
+    iso.solve(prob, iso.IsoMP(), y0, dt=0.01, n_steps=30, writer=io.HDF5Writer(path),
+              progress=False)  # fmt: skip
+    run = io.load(path)
+    assert run.meta["fields"] == ["Gamma", "M"]
+    fig = plotting.plot_run(run)
+    states = next(ax for ax in fig.axes if ax.get_title().startswith("state"))
+    labels = states.get_legend_handles_labels()[1]
+    assert labels and all(label.split(".")[0] in ("Gamma", "M") for label in labels)
+
+
 def test_parser_names_come_from_the_registry() -> None:
     parser = cli.build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices

@@ -219,6 +219,8 @@ class OpenRun:
             "state_dtype": np.dtype(alg.dtype).str,
             "casimir_scale": np.asarray(alg.casimir_scale(W), dtype=float).tolist(),
         }
+        if isinstance(getattr(alg, "fields", None), tuple):  # pairs: the fields' names
+            meta["fields"] = [str(f) for f in alg.fields]
         if not self.memory:
             meta["model_fingerprint"] = model_fingerprint(self.problem, W)
         return meta

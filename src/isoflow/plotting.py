@@ -47,7 +47,14 @@ def _title(run: Any, member: str = "") -> str:
 
 
 def _component(run: Any, idx: tuple[int, ...]) -> str:
-    """Name of one state entry: ``w_3.x`` for particles, ``W[1, 2]`` for matrices."""
+    """Name of one state entry: ``w_3.x`` for particles, ``W[1, 2]`` for matrices, ``M.x`` and
+    ``Theta[1, 2]`` for the fields of a pair (their names as the file records them)."""
+    fields = run.meta.get("fields")
+    if isinstance(fields, list) and len(fields) == 2 and idx:
+        name, rest = str(fields[idx[0]]), idx[1:]
+        if "R^3" in str(run.meta.get("algebra", "")) and len(rest) == 1:
+            return f"{name}.{'xyz'[rest[0]]}"
+        return f"{name}[{', '.join(map(str, rest))}]"
     if "R^3" in str(run.meta.get("algebra", "")) and idx:
         *rest, c = idx
         return f"w_{','.join(map(str, rest))}.{'xyz'[c]}"
