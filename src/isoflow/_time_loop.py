@@ -219,8 +219,9 @@ class OpenRun:
             "state_dtype": np.dtype(alg.dtype).str,
             "casimir_scale": np.asarray(alg.casimir_scale(W), dtype=float).tolist(),
         }
-        if isinstance(getattr(alg, "fields", None), tuple):  # pairs: the fields' names
-            meta["fields"] = [str(f) for f in alg.fields]
+        fields = getattr(alg, "fields", None)
+        if isinstance(fields, tuple):  # pairs: the fields' names
+            meta["fields"] = [str(f) for f in fields]
         if not self.memory:
             meta["model_fingerprint"] = model_fingerprint(self.problem, W)
         return meta

@@ -36,7 +36,8 @@ def _title(run: Any, member: str = "") -> str:
     params = ", ".join(f"{k} = {v}" for k, v in (cfg.get("params") or {}).items())
     title = f"{cfg.get('model', 'run')}" + (f" ({params})" if params else "")
     title += f": {meta.get('method')}, dt = {meta.get('dt'):g}" + member
-    info = run.run_info if isinstance(run.run_info, dict) else {}
+    info = getattr(run, "run_info", None)
+    info = info if isinstance(info, dict) else {}
     if info.get("status") == 1:
         title += " (failed: see its message)"
     elif not run.complete:
@@ -51,10 +52,10 @@ def _component(run: Any, idx: tuple[int, ...]) -> str:
     ``Theta[1, 2]`` for the fields of a pair (their names as the file records them)."""
     fields = run.meta.get("fields")
     if isinstance(fields, list) and len(fields) == 2 and idx:
-        name, rest = str(fields[idx[0]]), idx[1:]
-        if "R^3" in str(run.meta.get("algebra", "")) and len(rest) == 1:
-            return f"{name}.{'xyz'[rest[0]]}"
-        return f"{name}[{', '.join(map(str, rest))}]"
+        name, inner = str(fields[idx[0]]), idx[1:]
+        if "R^3" in str(run.meta.get("algebra", "")) and len(inner) == 1:
+            return f"{name}.{'xyz'[inner[0]]}"
+        return f"{name}[{', '.join(map(str, inner))}]"
     if "R^3" in str(run.meta.get("algebra", "")) and idx:
         *rest, c = idx
         return f"w_{','.join(map(str, rest))}.{'xyz'[c]}"
