@@ -341,3 +341,16 @@ def write_user_model(directory: Path, name: str, factor: str = "-", comment: str
     """The user's module ``directory/name.py`` (:data:`USER_MODEL_SOURCE`) with
     ``B = {factor}C * W`` and a trailing ``comment``."""
     (directory / f"{name}.py").write_text(USER_MODEL_SOURCE.format(factor=factor) + comment)
+
+
+def failed_ensemble_file(path: Any, n_steps: int = 30) -> Any:
+    """``path`` holding a run of three so(4) rigid bodies whose member 1 fails at its first
+    step (``h ||B||`` far above 2), streamed with ``throw=False``; returns ``path``."""
+    from isoflow import io
+
+    prob, _ = iso.models.rigid_body(4)
+    Y = iso.algebras.so(4).random(seed=1, batch=(3,), scale=0.3)
+    Y[1] *= 400.0
+    iso.solve(prob, iso.IsoMP(), Y, dt=0.1, n_steps=n_steps, writer=io.HDF5Writer(path),
+              throw=False, progress=False)  # fmt: skip
+    return path

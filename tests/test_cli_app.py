@@ -167,15 +167,10 @@ def test_plot_of_an_ensemble_draws_one_member_named_in_the_title(tmp_path: Path)
     failed ensemble says so in the title; a member out of range is a one-line error."""
     import numpy as np
 
-    import isoflow as iso
+    from helpers import failed_ensemble_file
     from isoflow import io, plotting
 
-    prob, _ = iso.models.rigid_body(4)
-    Y = iso.algebras.so(4).random(seed=1, batch=(3,), scale=0.3)
-    Y[1] *= 400.0  # h ||B|| far above 2: member 1 fails at its first step
-    path = tmp_path / "ens.h5"
-    iso.solve(prob, iso.IsoMP(), Y, dt=0.1, n_steps=30, writer=io.HDF5Writer(path),
-              throw=False, progress=False)  # fmt: skip
+    path = failed_ensemble_file(tmp_path / "ens.h5")  # member 1 fails at its first step
     run = io.load(path)
     fig = plotting.plot_run(run, member=2)
     assert "member 2 of 3" in fig._suptitle.get_text() and "failed" in fig._suptitle.get_text()

@@ -374,13 +374,10 @@ def test_a_resume_with_other_diagnostics_is_refused_even_with_force(
 def test_an_ensembles_export_shares_its_member_dimension(tmp_path: Path) -> None:
     """Every variable of an ensemble's export has the member axis as ``member`` (selectable
     across variables), the values equal the file's, and a failed run's status is kept."""
+    from helpers import failed_ensemble_file
+
     pytest.importorskip("xarray")
-    prob, _ = iso.models.rigid_body(4)
-    Y = iso.algebras.so(4).random(seed=1, batch=(3,), scale=0.3)
-    Y[1] *= 400.0  # h ||B|| far above 2: member 1 fails at its first step
-    path = tmp_path / "e.h5"
-    iso.solve(prob, iso.IsoMP(), Y, dt=0.1, n_steps=20, writer=io.HDF5Writer(path),
-              throw=False, progress=False)  # fmt: skip
+    path = failed_ensemble_file(tmp_path / "e.h5", n_steps=20)  # member 1 fails at once
     ds, run = io.to_xarray(path), io.load(path)
     assert ds["y"].dims == ("time", "member", "y_dim0", "y_dim1")
     assert ds["casimirs"].dims == ("time", "member", "casimirs_dim0")
