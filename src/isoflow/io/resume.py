@@ -186,10 +186,7 @@ def resume(
     plan_threads(threads)  # a malformed request is refused before anything else
     check_continue_options(progress, throw, status_every)
     check_flag(force, "force")
-    if chunk_rows is not None or flush_seconds is not None:
-        check_writer_settings(
-            1 if chunk_rows is None else chunk_rows, 1.0 if flush_seconds is None else flush_seconds
-        )
+    check_writer_settings(chunk_rows, flush_seconds)  # those given (None: the recorded ones)
     if problem is not None and (model is not None or params):
         raise ParameterError(
             "model= and params= rebuild the run's problem: give them or problem=, not both"
@@ -256,18 +253,11 @@ def _check_series(o: Opened, problem: IsospectralProblem) -> None:
     cannot add or drop one (even with ``force``)."""
     recorded = {k for k in o.rows if k not in ("ts", "ys")}
     expected = set(series_names(problem))
-    if recorded != expected:
+    extra, missing = sorted(recorded - expected), sorted(expected - recorded)
+    if extra or missing:
         what = "; ".join(
-            part
-            for part in (
-                "the file's " + ", ".join(sorted(recorded - expected))
-                if recorded - expected
-                else "",
-                "the model's " + ", ".join(sorted(expected - recorded))
-                if expected - recorded
-                else "",
-            )
-            if part
+            [f"the file's {', '.join(extra)}"] * bool(extra)
+            + [f"the model's {', '.join(missing)}"] * bool(missing)
         )
         raise o.fail(
             f"the model's diagnostics differ from the file's ({what}): a resumed run appends to "

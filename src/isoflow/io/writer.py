@@ -96,14 +96,15 @@ def _warn_if_the_disk_is_too_small(target: Path, meta: dict[str, Any]) -> None:
 
 def check_writer_settings(chunk_rows: Any, flush_seconds: Any) -> None:
     """``chunk_rows`` an integer >= 1 and ``flush_seconds`` a number >= 0 (``inf``: every
-    ``chunk_rows`` states only), else a :class:`~isoflow.ParameterError`."""
-    if (
+    ``chunk_rows`` states only), else a :class:`~isoflow.ParameterError`; ``None`` is not
+    checked (a resume's setting not given: the run's recorded one)."""
+    if chunk_rows is not None and (
         isinstance(chunk_rows, bool)
         or not isinstance(chunk_rows, (int, np.integer))
         or (chunk_rows < 1)
     ):
         raise ParameterError(f"chunk_rows must be an integer >= 1, got {chunk_rows!r}")
-    if (
+    if flush_seconds is not None and (
         isinstance(flush_seconds, bool)
         or not isinstance(flush_seconds, (int, float, np.integer, np.floating))
         or not flush_seconds >= 0  # NaN fails too
@@ -154,6 +155,11 @@ class HDF5Writer:
         flush_seconds: float = 1.0,
         force: bool = False,
     ) -> None:
+        if chunk_rows is None or flush_seconds is None:  # None means "recorded" to resume only
+            raise ParameterError(
+                f"chunk_rows and flush_seconds must be numbers, got {chunk_rows!r} and "
+                f"{flush_seconds!r}"
+            )
         check_writer_settings(chunk_rows, flush_seconds)
         if not isinstance(force, (bool, np.bool_)):  # "no" would count as true: a lost file
             raise ParameterError(f"force must be True or False, got {force!r}")
