@@ -317,7 +317,7 @@ class IsospectralProblem:
             scale = max(1.0, float(np.max(np.abs(alone))))
             if float(np.max(np.abs(got - alone))) <= 1e-10 * scale:
                 return
-            if getattr(self.B, "isoflow_kernel", None) is self.kernel:  # it runs member-wise
+            if self.kernel is not None and getattr(self.B, "isoflow_kernel", None) is self.kernel:
                 raise InvalidBError(
                     f"the kernel {getattr(self.kernel, 'name', '')} gives other values for the "
                     "same state: its function must depend on W and its arguments only, and must "
