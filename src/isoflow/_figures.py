@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._errors import ParameterError
+from ._flags import check_flag
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -70,8 +70,7 @@ def save(fig: Figure, path: str | os.PathLike[str], *, force: bool = False) -> P
     FileNotFoundError
         The directory of ``path`` does not exist (it is not created: a mistyped path).
     """
-    if not isinstance(force, bool):  # "no" would count as true
-        raise ParameterError(f"force must be True or False, got {force!r}")
+    check_flag(force, "force")  # "no" would count as true
     p = Path(path)
     if p.suffix.lower() not in SUFFIXES:
         raise ValueError(f"{p}: choose a .png, .pdf or .svg file name")

@@ -27,6 +27,7 @@ from ._errors import (
     TimeSpanError,
 )
 from ._failures import step_exception
+from ._flags import check_flag
 from ._save_grid import SaveGrid
 from ._solution import RUN_FAILED, RUN_FINISHED, RUN_INTERRUPTED, RunState, Solution, SolveStats
 from ._time_loop import open_run, run, run_threads
@@ -408,13 +409,6 @@ def _check_flags(progress: Any, throw: Any) -> None:
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
         raise ParameterError(f"progress must be True, False or None, got {progress!r}")
     check_flag(throw, "throw")
-
-
-def check_flag(value: Any, name: str) -> None:
-    """``value`` is a bool (``ParameterError`` naming ``name`` otherwise: a string such as
-    ``"no"`` would count as true)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ParameterError(f"{name} must be True or False, got {value!r}")
 
 
 def check_continue_options(progress: Any, throw: Any, status_every: Any) -> None:

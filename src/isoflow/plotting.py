@@ -127,9 +127,7 @@ def _one_member(run: Any, member: int | tuple[int, ...] | None) -> tuple[Any, st
 
     from ._errors import ParameterError
 
-    state = tuple(run.meta.get("state_shape", np.shape(run.ys)[1:]))
-    core = tuple(run.meta.get("core_shape", state))
-    batch = state[: len(state) - len(core)]
+    batch = run.batch_shape
     if not batch:
         if member is not None:
             raise ParameterError(f"member={member!r}: this run is one system, not an ensemble")
@@ -157,7 +155,7 @@ def _one_member(run: Any, member: int | tuple[int, ...] | None) -> tuple[Any, st
     one = dataclasses.replace(
         run, ys=np.asarray(run.ys)[cut],
         series={k: np.asarray(v)[cut] for k, v in run.series.items()},
-        meta={**run.meta, "state_shape": list(core)},
+        meta={**run.meta, "state_shape": list(run.meta["core_shape"])},
     )  # fmt: skip
     label = index[0] if len(index) == 1 else index
     return one, f", member {label} of {size}"

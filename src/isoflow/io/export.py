@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._errors import IsoflowError, ParameterError, ResultFileError
+from .._errors import IsoflowError, ResultFileError
+from .._flags import check_flag
 from ..diagnostics import Diagnostics, DiagnosticsAccumulator
 from ..problems import IsospectralProblem
 from .reader import RunData, load
@@ -46,9 +47,7 @@ def to_xarray(path: str | os.PathLike[str]) -> Any:
     except ImportError as exc:  # pragma: no cover - optional dependency
         raise IsoflowError("to_xarray needs xarray: pip install 'isoflow[xarray]'") from exc
     run = load(path)
-    state = tuple(run.meta.get("state_shape", run.ys.shape[1:]))
-    core = tuple(run.meta.get("core_shape", state))
-    nbatch = len(state) - len(core)
+    nbatch = len(run.batch_shape)
     members = ["member"] if nbatch == 1 else [f"member_{i}" for i in range(nbatch)]
     data_vars: dict[str, Any] = {}
 
@@ -96,8 +95,7 @@ def to_netcdf(
     src, dst = Path(path), Path(out)
     if dst.exists() and src.exists() and os.path.samefile(src, dst):
         raise ResultFileError(f"{dst} is the result file being exported; choose another name")
-    if not isinstance(force, (bool, np.bool_)):
-        raise ParameterError(f"force must be True or False, got {force!r}")
+    check_flag(force, "force")
     target = check_target(dst, force=force, resumable=False)  # an export is not a run
     if not target.parent.is_dir():  # not created: a mistyped path
         raise ResultFileError(f"{dst}: no directory {target.parent} to write it in")

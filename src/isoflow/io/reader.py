@@ -24,8 +24,9 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .._errors import IsoflowError, ParameterError, ResultFileError
+from .._errors import IsoflowError, ResultFileError
 from .._failures import MemberFailures
+from .._flags import check_flag
 from .._save_grid import SaveGrid
 from ..diagnostics import DriftAccumulator
 from .codec import (
@@ -496,8 +497,7 @@ def info(path: str | os.PathLike[str], *, verify_states: bool = False) -> dict[s
         ``verified`` (every saved state checked), ``n_saved`` (valid saved states),
         ``t_last``, ``step``, ``complete``, ``run_info`` and ``drifts``.
     """
-    if not isinstance(verify_states, (bool, np.bool_)):
-        raise ParameterError(f"verify_states must be True or False, got {verify_states!r}")
+    check_flag(verify_states, "verify_states")
     return _live_retry(path, lambda: _info(path, verify_states))
 
 
@@ -572,6 +572,13 @@ class RunData:
     def complete(self) -> bool:
         """Whether all requested steps are in the file."""
         return self.step == int(self.meta.get("n_steps", -1))
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The ensemble's shape (``()`` for one system): the state's leading axes."""
+        state = tuple(self.meta.get("state_shape", np.shape(self.ys)[1:]))
+        core = tuple(self.meta.get("core_shape", state))
+        return state[: len(state) - len(core)]
 
 
 def load(path: str | os.PathLike[str]) -> RunData:

@@ -32,15 +32,9 @@ import numpy as np
 from .._errors import ModelChangedError, ParameterError, ResultFileError
 from .._failures import MemberFailures
 from .._fingerprint import fingerprint_changes, model_fingerprint
+from .._flags import check_flag
 from .._solution import RUN_FINISHED, SolveStats
-from .._solve import (
-    RunState,
-    Solution,
-    check_continue_options,
-    check_flag,
-    check_restart,
-    continue_run,
-)
+from .._solve import RunState, Solution, check_continue_options, check_restart, continue_run
 from .._time_loop import failure_fields
 from ..diagnostics import DiagnosticsAccumulator, series_names
 from ..methods import Method

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from .._errors import ParameterError, ResultFileError, ResultWriteError
 from .._failures import MemberFailures
+from .._flags import check_flag
 from .layout import Handles, create_layout, write_attrs
 from .lock import WriteLock
 from .safefile import SafeFile
@@ -161,8 +162,7 @@ class HDF5Writer:
                 f"{flush_seconds!r}"
             )
         check_writer_settings(chunk_rows, flush_seconds)
-        if not isinstance(force, (bool, np.bool_)):  # "no" would count as true: a lost file
-            raise ParameterError(f"force must be True or False, got {force!r}")
+        check_flag(force, "force")  # "no" would count as true: a lost file
         self.path = Path(path)
         self.force = bool(force)
         self._target = check_target(self.path, force=self.force)

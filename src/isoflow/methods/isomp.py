@@ -53,7 +53,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .._errors import ParameterError
+from .._flags import check_flag
 from ..algebras import Algebra
 from ..algebras._vectors import ParticleVectors
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
@@ -141,8 +141,7 @@ class IsoMP(Method):
         check_implicit_options(
             self.solver, self.initial_guess, self.extrapolation_order, default_order=True
         )
-        if not isinstance(self.compensated, (bool, np.bool_)):
-            raise ParameterError(f"compensated must be True or False, got {self.compensated!r}")
+        check_flag(self.compensated, "compensated")
 
     def stage_problem(
         self, problem: IsospectralProblem, W: Array, h: float,
