@@ -264,6 +264,14 @@ def test_a_malformed_environment_bound_is_named(monkeypatch: pytest.MonkeyPatch)
     assert plan_threads(1).blas == 1
 
 
+def _with_numba_threads(count: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """``python *args`` in a process of its own with ``NUMBA_NUM_THREADS=count`` (numba reads
+    it when it starts, once per process)."""
+    env = {**_clean_env(), "NUMBA_NUM_THREADS": count}
+    return subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True,
+                          timeout=600, check=False)  # fmt: skip
+
+
 def test_a_malformed_numba_thread_count_is_named_before_numba_refuses_it() -> None:
     """numba's own import fails on NUMBA_NUM_THREADS=0 ("must be > 0", naming nothing): the
     models, the solve and the command line name the variable first, in one line."""
@@ -284,13 +292,9 @@ def test_a_malformed_numba_thread_count_is_named_before_numba_refuses_it() -> No
         "except iso.ParameterError as exc:\n"
         "    print(exc)\n"
     )
-    env = {**_clean_env(), "NUMBA_NUM_THREADS": "0"}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         timeout=600, check=False)  # fmt: skip
+    out = _with_numba_threads("0", "-c", code)
     assert out.returncode == 0 and out.stdout.splitlines() == [message] * 2, out.stderr[-2000:]
-    cli = subprocess.run([sys.executable, "-m", "isoflow.cli", "run", "rigid-body", "--n-steps",
-                          "2"], env=env, capture_output=True, text=True, timeout=600,
-                         check=False)  # fmt: skip
+    cli = _with_numba_threads("0", "-m", "isoflow.cli", "run", "rigid-body", "--n-steps", "2")
     assert cli.returncode == 1 and cli.stderr.strip() == f"isoflow: error: {message}"
 
 
@@ -316,9 +320,7 @@ def test_environment_variables_bound_every_request(
         "s = iso.solve(prob, iso.IsoMP(), W, dt=0.1, n_steps=2, threads=2).stats\n"
         "print(json.dumps([s.runner, s.threads]))\n"
     )
-    env = {**_clean_env(), "NUMBA_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         timeout=600, check=False)  # fmt: skip
+    out = _with_numba_threads("1", "-c", code)
     assert out.returncode == 0, out.stderr[-2000:]
     runner, threads = json.loads(out.stdout.strip().splitlines()[-1])
     assert "SIMD lanes" in runner  # serial: the 2 cores went to BLAS
