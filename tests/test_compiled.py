@@ -449,6 +449,13 @@ def test_compiled_b_is_checked() -> None:
     for y0 in (alg.random(0), alg.random(0, batch=(3,))):
         with pytest.raises(iso.InvalidBError, match="gives other values for the same state"):
             iso.solve(moving, IsoMP(), y0, dt=0.1, n_steps=2)
+    # a field that relies on out starting at zero: the NumPy path zeroes it, the compiled
+    # loops do not (this ran on stale entries, and gave another answer from run to run)
+    for f, entry in ((uk.skips_the_diagonal, r"out\[0, 0\]"), (uk.adds_into_out, r"out\[0, 0\]")):
+        partial = iso.IsospectralProblem(algebra=alg, kernel=iso.CompiledB(f, (C4,)))
+        for y0, where in ((alg.random(0), entry), (alg.random(0, batch=(3,)), r"out\[0, 0, 0\]")):
+            with pytest.raises(iso.InvalidBError, match=where + " unwritten or adds to it"):
+                iso.solve(partial, IsoMP(), y0, dt=0.1, n_steps=2)
     # a kernel that is not the problem's B is caught before the run
     C = np.ones((4, 4))
     wrong = iso.IsospectralProblem(

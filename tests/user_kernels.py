@@ -146,3 +146,22 @@ def modifies_its_state(W, out, C):  # type: ignore[no-untyped-def]
         for j in range(n):
             out[i, j] = -C[i, j] * W[i, j]
             W[i, j] *= 1.0 + 1e-6
+
+
+@numba.njit(cache=True)
+def skips_the_diagonal(W, out, C):  # type: ignore[no-untyped-def]
+    """A user error: ``B = -C * W`` on so(n), the zero diagonal left to ``out`` starting at 0."""
+    n = W.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if i != j:
+                out[i, j] = -C[i, j] * W[i, j]
+
+
+@numba.njit(cache=True)
+def adds_into_out(W, out, C):  # type: ignore[no-untyped-def]
+    """A user error: ``B = -C * W`` accumulated into ``out`` as if it started at 0."""
+    n = W.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] += -C[i, j] * W[i, j]

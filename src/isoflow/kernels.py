@@ -93,6 +93,10 @@ class Kernel:
         Members are evaluated one by one by a compiled loop into a new array of the
         normalizer's dtype.
         """
+        return self._apply(W, algebra, 0.0)
+
+    def _apply(self, W: ArrayLike, algebra: Algebra, fill: float) -> Array:
+        """The compiled ``f`` on every member of ``W``, into an ``out`` filled with ``fill``."""
         from ._kernel_fields import apply_field
 
         f, args = self.field()
@@ -105,7 +109,7 @@ class Kernel:
             )
         batch = Wa.shape[: Wa.ndim - len(core)]
         flat = Wa.reshape(-1, *core)
-        out = np.zeros(flat.shape, dtype=algebra.normalizer.dtype)
+        out = np.full(flat.shape, fill, dtype=algebra.normalizer.dtype)
         apply_field(f, args, flat, out)
         return out.reshape(*batch, *core)
 
@@ -133,7 +137,8 @@ class CompiledB(Kernel):
         ``@numba.njit(cache=True)`` function that writes ``B(W)`` into ``out``. ``W`` is one
         state, C-contiguous: an ``(n, n)`` matrix (``float64`` or ``complex128``, the space's
         dtype) or the ``(N, 3)`` ``float64`` array of a particle space; ``out`` has ``W``'s
-        shape and the normalizer's dtype and holds garbage on entry (write every entry).
+        shape and the normalizer's dtype and holds garbage on entry (write every entry: a run
+        checks it first, with ``out`` filled with NaN).
         ``f`` must not keep references to ``W`` or ``out`` and must not modify ``W``.
     args : tuple
         Extra arguments passed to ``f`` after ``out``: arrays and numbers, not nested tuples,
@@ -204,6 +209,32 @@ class CompiledB(Kernel):
 
     def field(self) -> tuple[Callable[..., None], tuple[Any, ...]]:
         return self.f, self.args
+
+    def unwritten_entry(self, W: ArrayLike, algebra: Algebra) -> tuple[int, ...] | None:
+        """The index of the first entry of ``out`` that ``f`` leaves unwritten, or ``None``.
+
+        ``f`` is called on ``W`` with ``out`` filled with NaN: an entry still NaN was either
+        never written or added to (``out[i, j] += ...``), so ``f`` relied on ``out`` starting
+        at zero. The compiled loops hand ``f`` the buffer of the previous call, so such an
+        entry would keep a stale value there, while the NumPy path (``out`` zeroed) would not.
+
+        Parameters
+        ----------
+        W : array_like, shape (*batch, *algebra.shape)
+            States at which to call ``f``, one call a member; ``f`` must give finite values
+            there (checked before by :meth:`~isoflow.IsospectralProblem.check_B`).
+        algebra : Algebra
+            The problem's space.
+
+        Returns
+        -------
+        tuple of int or None
+            The index into ``W``'s shape of the first NaN entry, or ``None`` when ``f``
+            writes every entry.
+        """
+        probe = self._apply(W, algebra, np.nan)
+        missing = np.argwhere(np.isnan(probe))
+        return tuple(int(i) for i in missing[0]) if missing.size else None
 
     def __repr__(self) -> str:
         return f"CompiledB({self.name}, {len(self.args)} args)"

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from ._errors import ArgumentTypeError, InvalidBError, ParameterError
 from .algebras import Algebra
-from .kernels import Kernel
+from .kernels import CompiledB, Kernel
 from .noise import TransportNoise
 from .splitting import Forcing, LinearPart, StochasticForcing
 
@@ -265,6 +265,14 @@ class IsospectralProblem:
         if not np.all(np.isfinite(out)):
             raise InvalidBError("B returned non-finite values (NaN or Inf)")
         outc = out.astype(norm_alg.dtype, copy=False)
+        if isinstance(self.kernel, CompiledB):
+            unwritten = self.kernel.unwritten_entry(W, alg)
+            if unwritten is not None:
+                raise InvalidBError(
+                    f"the kernel {self.kernel.name} leaves out{list(unwritten)} unwritten or "
+                    "adds to it: the compiled loops do not zero out before a call, so write "
+                    "every entry of out, zeros included"
+                )
         if self.kernel is not None:
             fast = np.asarray(self.kernel.evaluate(W, alg))
             gap = float(np.max(np.abs(fast - outc))) if fast.shape == outc.shape else np.inf
