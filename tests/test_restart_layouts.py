@@ -106,6 +106,14 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
         lambda: iso.models.mhd_sphere(N=17, lmax=4, seed=1),
         iso.IsoMP,
     ),
+    "su(17) BLAS, Cayley update": (
+        lambda: _euler(17),
+        lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),
+    ),
+    "so(5) NumPy, Cayley update": (
+        lambda: _elementwise(iso.algebras.so(5), skew=True),
+        lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),
+    ),
     "su(6) NumPy": (lambda: _euler(6, kernel=False), iso.IsoMP),
     "sp(2) NumPy": (lambda: _python_b(iso.algebras.sp(2), 3), iso.IsoMP),
     "gl(3) NumPy": (lambda: _python_b(iso.algebras.gl(3), 2), iso.IsoMP),

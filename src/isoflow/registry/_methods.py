@@ -112,6 +112,12 @@ _BASES: dict[str, tuple[Callable[..., Method], str]] = {
 #: Methods: name -> :class:`MethodSpec`.
 METHODS: dict[str, MethodSpec] = {
     **{name: MethodSpec(name, _plain(cls), text) for name, (cls, text) in _BASES.items()},
+    "isomp-cayley": MethodSpec(
+        "isomp-cayley",
+        lambda solver: IsoMP(solver=solver or FixedPoint(), update="cayley"),
+        "IsoMP finished by the Cayley factor: isospectral to rounding at any tolerance, for a "
+        "loose one (e.g. rtol = 1e-8); so, u, su, sym, herm",
+    ),
     "rk4": MethodSpec("rk4", lambda solver: RK4(), "classical RK4 (explicit)", implicit=False),
     "stochastic-isomp": MethodSpec(
         "stochastic-isomp",

@@ -21,6 +21,7 @@ that provides the blocks it :attr:`needs <CompiledStage.needs>`; compositions of
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,7 +29,7 @@ from typing import Any
 from ...methods import IsoMP, SphericalMidpoint, StochasticIsoMP, Strang
 from ...methods._base import StepDataRequest
 from ...splitting import data_widths
-from .. import dense_planar, dense_tiles, spin_chain
+from .. import cayley, dense_planar, dense_tiles, spin_chain
 from ..dense import DenseBlas
 from ..layout import Layout
 from ..spin_chain import SpinChain
@@ -184,6 +185,8 @@ def register(method: type, stage: CompiledStage) -> None:
 
 def stage_for(method: Any) -> CompiledStage | None:
     """The compiled stage of ``method`` (an instance), or ``None``."""
+    if type(method) is IsoMP and method.update == "cayley":
+        return _ISOMP_CAYLEY
     return _STAGES.get(type(method))
 
 
@@ -203,6 +206,13 @@ def _isomp_offsets(method: IsoMP, problem: Any) -> int:
     if method.initial_guess != "extrapolate":
         return 0
     return method.order_for(problem.algebra) + 1
+
+
+def _dense_blas_cayley(layout: Layout) -> tuple[Any, Any]:
+    """IsoMP with the Cayley update on the BLAS layout: IsoMP's iteration, another finish."""
+    if layout.record.planar:
+        return dense_planar.iterate, cayley.finish_planar
+    return dense_tiles.iterate, cayley.finish_tiles
 
 
 def _smm_offsets(method: SphericalMidpoint, problem: Any) -> int:
@@ -234,6 +244,23 @@ register(
         },
     ),
 )
+#: ``IsoMP(update="cayley")``: IsoMP's stage with another finish, compiled on the BLAS layout
+#: only (its finish solves with LAPACK); elsewhere the ``"cayley_update"`` block is missing and
+#: the run takes the NumPy path.
+_ISOMP_CAYLEY = dataclasses.replace(
+    _STAGES[IsoMP],
+    name="Cayley update",
+    needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
+    specializations={
+        DenseBlas: Specialization(
+            _dense_blas_cayley,
+            _dense_blas_rows,
+            "IsoMP's iteration (benchmarks 3, 10, 12); the Cayley finish pays at small N "
+            "(benchmark 22)",
+        ),
+    },
+)
+
 register(
     SphericalMidpoint,
     CompiledStage(
@@ -263,7 +290,7 @@ def _dense_blas_split(layout: Layout) -> tuple[Any, Any]:
 
 def _split_applies(method: Strang, problem: Any, composed: bool) -> bool:
     """``Strang(IsoMP())``; composed only when its step data are empty (steady forcing)."""
-    if type(method.base) is not IsoMP:
+    if type(method.base) is not IsoMP or method.base.update != "midpoint":
         return False
     return not composed or sum(data_widths(problem)) == 0
 

@@ -1,0 +1,90 @@
+"""Benchmark 22: IsoMP's Cayley update with a loose stage tolerance against the midpoint update
+at the default tolerance, Euler on the sphere (issue 24, lever 2).
+
+The ``euler-sphere`` random vorticity (``seed = 1``), ``h ||B||_2 = 0.3``, ``STEPS`` steps at
+N = 64, 128 and 256 (quick: 32 and 64), one BLAS thread, both on their compiled loops:
+
+* ``IsoMP()`` (midpoint update, ``FixedPoint(rtol=1e-14)``), the default;
+* ``IsoMP(update="cayley", solver=FixedPoint(rtol=RTOL))``: a stage solved to ``RTOL`` and the
+  step finished by the Cayley factor of its ``B``, isospectral to rounding whatever the
+  tolerance (:mod:`isoflow.methods.isomp`).
+
+Each run is a whole ``solve`` (its first steps, with few offsets to extrapolate, included),
+timed alternately, best of three. Recorded: the time ratio (Cayley / default; target below 1
+where the guide recommends the update, N <= 128), the iterations a step of both (issue 24's
+target: at most 4 from N = 128), the largest relative energy error of both (target: no larger
+than the default's, within 1 %) and the Casimir drift of the Cayley runs (at rounding). Run alone:
+``python benchmarks/bench_22_cayley_update.py``.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+
+from suite import benchmark, paired_best_times, record
+
+STEPS = 100
+RTOL = 1e-8
+
+
+def _compare(N: int, steps: int) -> dict[str, Any]:
+    import isoflow as iso
+
+    prob, W0 = iso.models.euler_sphere(N=N, seed=1)
+    h = float(0.3 / np.linalg.norm(prob.B(W0), 2))
+    methods = {
+        "midpoint": iso.IsoMP(),
+        "cayley": iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=RTOL)),
+    }
+    sols: dict[str, Any] = {}
+
+    def run(name: str) -> None:
+        sols[name] = iso.solve(
+            prob, methods[name], W0, dt=h, n_steps=steps, save_every=max(1, steps // 5),
+            progress=False,
+        )  # fmt: skip
+
+    t_cay, t_mid = paired_best_times(lambda: run("cayley"), lambda: run("midpoint"), repeats=3)
+    row: dict[str, Any] = {"N": N, "steps": steps, "h": h}
+    for name, t in (("cayley", t_cay), ("midpoint", t_mid)):
+        sol = sols[name]
+        H = np.asarray(sol.diagnostics.hamiltonian)
+        row[f"{name}_ms_per_step"] = 1e3 * t / steps
+        row[f"{name}_iterations"] = float(sol.stats.iterations_mean)
+        row[f"{name}_energy_error"] = float(np.max(np.abs(H - H[0])) / abs(H[0]))
+        row[f"{name}_casimir_drift"] = float(sol.diagnostics.casimir_drift)
+        row[f"{name}_runner"] = sol.stats.runner
+    row["ratio"] = t_cay / t_mid
+    return row
+
+
+@benchmark(22, "IsoMP's Cayley update (rtol 1e-8) against the default, Euler on the sphere")
+def run(quick: bool) -> list[dict[str, Any]]:
+    from isoflow.threads import thread_limits
+
+    sizes = (32, 64) if quick else (64, 128, 256)
+    rows = []
+    with thread_limits(blas=1, numba=1):
+        for N in sizes:
+            row = _compare(N, 20 if quick else STEPS)
+            ratio = row.pop("ratio")
+            met = (
+                (N < 128 or row["cayley_iterations"] <= 4.0)  # issue 24: N = 128..1024
+                and row["cayley_energy_error"] <= 1.01 * row["midpoint_energy_error"]
+                and row["cayley_casimir_drift"] <= 1e-13
+                and (N > 128 or ratio < 1.0)
+            )
+            name = f"N = {N}: Cayley update / default, time per step"
+            target = "< 1 at N <= 128; <= 4 its from N = 128; same energy error"
+            metric = "time ratio per step"
+            rows.append(record(22, name, **row, metric=metric, value=ratio, target=target, met=met))
+    return rows
+
+
+if __name__ == "__main__":
+    import run_all
+
+    sys.exit(run_all.main(["--only", "22", *sys.argv[1:]]))

@@ -1,0 +1,84 @@
+r"""IsoMP's Cayley update on :class:`~isoflow._compiled.dense.DenseBlas` states.
+
+The finish of ``IsoMP(update="cayley")`` (:mod:`isoflow.methods.isomp`, "The Cayley update"):
+with ``A = I - h/2 B`` for the ``B`` of the accepted stage, left in the scratch rows by the last
+iteration,
+
+.. math::
+
+    Y = A^{-1} W, \qquad Z = \big(A^{-1} Y^\dagger\big)^\dagger, \qquad
+    W_{k+1} = W + 4Z - 2Y - 2 s Y^\dagger,
+
+``s`` the sign of the space's involution (``W^\dagger = s W``: ``-1`` on skew, ``+1`` on
+Hermitian states). The increment is mirrored into ``V`` from its lower triangle and added
+with the compensation ``E`` (unless empty) as the midpoint finish adds its own
+(:func:`isoflow._compiled.dense_tiles.finish`), so every state lies in ``V`` to the last bit
+and the trace is removed on ``su(n)``. The two solves run through numba's
+``np.linalg.solve`` (LAPACK's LU, in the library the BLAS layout calls).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .dense_planar import _planes
+from .dense_tiles import close_update
+from .flat import two_sum
+
+__all__ = ["finish_planar", "finish_tiles"]
+
+
+@numba.njit(cache=True)
+def _cayley_update(lay, B, W, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn = W + C W C^H - W`` for the ``(n, n)`` field ``B`` (module docstring)."""
+    n = lay.n
+    s = lay.s
+    Wm = W.reshape((n, n))
+    Wo = Wn.reshape((n, n))
+    compensated = E.shape[0] != 0
+    Em = E.reshape((n, n)) if compensated else E.reshape((0, 0))
+    A = -0.5 * hp * B
+    for i in range(n):
+        A[i, i] += 1.0
+    Y = np.linalg.solve(A, np.ascontiguousarray(Wm))
+    Z = np.linalg.solve(A, np.ascontiguousarray(np.conj(Y.T)))
+    acc = 0.0
+    for i in range(n):
+        for j in range(i + 1):
+            d = 4.0 * np.conj(Z[j, i]) - 2.0 * Y[i, j] - 2.0 * s * np.conj(Y[j, i])
+            if i == j:
+                d = 0.5 * (d + s * np.conj(d))  # the diagonal of an element of V
+            if compensated:
+                v, e = two_sum(Wm[i, j], d + Em[i, j])
+                Em[i, j] = e
+                if i != j:
+                    Em[j, i] = s * np.conj(e)
+            else:
+                v = Wm[i, j] + d
+            Wo[i, j] = v
+            if i != j:
+                Wo[j, i] = s * np.conj(v)
+            acc += abs(v.real) + abs(v.imag)
+    close_update(lay, Wn, E, acc, fin)
+
+
+@numba.njit(cache=True)
+def finish_tiles(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """The Cayley update after :func:`isoflow._compiled.dense_tiles.iterate` (``B`` is
+    ``work[0]``)."""
+    n = lay.n
+    _cayley_update(lay, work[0].reshape((n, n)).copy(), W, hp, E, Wn, fin)
+
+
+@numba.njit(cache=True)
+def finish_planar(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """The Cayley update after :func:`isoflow._compiled.dense_planar.iterate` (``B``'s real
+    and imaginary planes are ``work[1]``)."""
+    n = lay.n
+    Br, Bi = _planes(work[1], n)
+    B = np.empty((n, n), dtype=np.complex128)
+    for i in range(n):
+        for j in range(n):
+            B[i, j] = complex(Br[i, j], Bi[i, j])
+    _cayley_update(lay, B, W, hp, E, Wn, fin)

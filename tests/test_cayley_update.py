@@ -1,0 +1,141 @@
+"""IsoMP's Cayley update (``IsoMP(update="cayley")``): isospectral to rounding whatever the
+stage tolerance, IsoMP itself at a tight one, second order, the same on the compiled and the
+NumPy paths, and refused where it does not apply."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+from isoflow import io
+from isoflow.reference import reference_solution
+
+
+def cayley(rtol: float = 1e-8, **kw: Any) -> iso.IsoMP:
+    return iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=rtol), **kw)
+
+
+def _eigenvalue_drift(alg: Any, ys: np.ndarray) -> float:
+    """Largest change of the sorted eigenvalues over the run, relative to the spectral radius
+    (``i W`` is Hermitian on the skew spaces, ``W`` itself on the others)."""
+    skew = np.allclose(np.conj(np.swapaxes(ys[0], -1, -2)), -ys[0])
+    ev = np.sort(np.linalg.eigvalsh(1j * ys if skew else ys), axis=-1)
+    return float(np.max(np.abs(ev - ev[0])) / np.max(np.abs(ev[0])))
+
+
+def _elementwise(alg: Any, seed: int = 0) -> tuple[Any, Any]:
+    """``B = C o W`` with ``C`` symmetric (skew spaces) or antisymmetric (Hermitian ones)."""
+    rng = np.random.default_rng(seed)
+    n = alg.shape[0]
+    A = rng.standard_normal((n, n))
+    C = A - A.T if alg.name.startswith(("sym", "herm")) else A + A.T
+    prob = iso.IsospectralProblem(algebra=alg, kernel=iso.ElementwiseLinear(C))
+    return prob, alg.random(seed + 1)
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: iso.models.rigid_body(n=6),  # so(6), NumPy path (written-out products)
+        lambda: iso.models.euler_sphere(N=24, seed=2),  # su(24), compiled BLAS tiles
+        lambda: _elementwise(iso.algebras.herm(20)),  # Hermitian states, compiled tiles
+        lambda: iso.models.toda(6, seed=3),  # sym(6), NumPy path
+        lambda: iso.models.toda(20, seed=3),  # sym(20), compiled real tiles
+    ],
+    ids=["so(6)", "su(24)", "herm(20)", "sym(6)", "sym(20)"],
+)
+def test_the_spectrum_stays_at_rounding_whatever_the_tolerance(make: Any) -> None:
+    """At ``rtol = 1e-6`` the midpoint update moves the eigenvalues by the stage's residual
+    (above 1e-9 here); the Cayley update keeps them to 1e-13 over 200 steps."""
+    prob, y0 = make()
+    h = float(0.3 / np.linalg.norm(prob.B(y0), 2))
+    loose = iso.FixedPoint(rtol=1e-6)
+    mid = iso.solve(prob, iso.IsoMP(solver=loose), y0, dt=h, n_steps=200, progress=False)
+    cay = iso.solve(prob, cayley(1e-6), y0, dt=h, n_steps=200, progress=False)
+    alg = prob.algebra
+    assert _eigenvalue_drift(alg, mid.ys) > 1e-9  # what the update is for
+    assert _eigenvalue_drift(alg, cay.ys) < 1e-13
+    # the same flow (over the first steps: some of these flows are chaotic)
+    assert np.max(np.abs(cay.ys[:21] - mid.ys[:21])) < 1e-4 * np.max(np.abs(y0))
+
+
+@pytest.mark.parametrize("compensated", [True, False])
+def test_at_a_tight_tolerance_it_is_isomp(compensated: bool) -> None:
+    """At the fixed point, ``C W C^H = W + h [B, X]``: the two updates agree to rounding."""
+    for prob, y0 in (iso.models.euler_sphere(N=24, seed=2), iso.models.rigid_body(n=6)):
+        h = float(0.3 / np.linalg.norm(prob.B(y0), 2))
+        kw = dict(dt=h, n_steps=40, progress=False)
+        mid = iso.solve(prob, iso.IsoMP(compensated=compensated), y0, **kw)
+        cay = iso.solve(prob, cayley(1e-14, compensated=compensated), y0, **kw)
+        assert np.max(np.abs(cay.ys - mid.ys)) <= 1e-12 * np.max(np.abs(y0))
+
+
+def test_second_order_against_dop853() -> None:
+    """Global error at ``t = 1`` of the so(4) rigid body against DOP853 (rtol 1e-13): fitted
+    order within 0.15 of 2 with a stage tolerance of 1e-10."""
+    prob, y0 = iso.models.rigid_body(n=4)
+    ref = reference_solution(prob, y0, [1.0])[0]
+    hs = np.array([0.1, 0.05, 0.025, 0.0125])
+    errs = []
+    for h in hs:
+        sol = iso.solve(prob, cayley(1e-10), y0, dt=float(h), n_steps=round(1 / h),
+                        progress=False)  # fmt: skip
+        errs.append(np.max(np.abs(sol.ys[-1] - ref)))
+    slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    assert abs(slope - 2.0) < 0.15, (slope, errs)
+
+
+@pytest.mark.parametrize("N", [24, 130])  # complex tiles; real planes (N >= 128)
+def test_the_compiled_finish_is_the_numpy_one(N: int) -> None:
+    prob, y0 = iso.models.euler_sphere(N=N, seed=1)
+    h = float(0.3 / np.linalg.norm(prob.B(y0), 2))
+    kw = dict(dt=h, n_steps=12 if N > 100 else 40, progress=False)
+    fast = iso.solve(prob, cayley(1e-8), y0, **kw)
+    slow = iso.solve(dataclasses.replace(prob, kernel=None), cayley(1e-8), y0, **kw)
+    assert "Cayley update" in fast.stats.runner and slow.stats.runner == "NumPy"
+    # the same iterates; the finishes' solves round differently
+    assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12 * np.max(np.abs(y0))
+    assert fast.stats.iterations_mean == slow.stats.iterations_mean
+    assert _eigenvalue_drift(prob.algebra, fast.ys) < 1e-13
+
+
+def test_an_ensemble_and_a_composition_run_it() -> None:
+    prob, y0 = iso.models.euler_sphere(N=20, seed=1)
+    alg = prob.algebra
+    ys = np.stack([alg.project(y0 + 1e-2 * alg.random(s)) for s in range(3)])
+    h = float(0.3 / np.linalg.norm(prob.B(y0), 2))
+    ens = iso.solve(prob, cayley(1e-8), ys, dt=h, n_steps=20, progress=False)
+    for m in range(3):
+        one = iso.solve(prob, cayley(1e-8), ys[m], dt=h, n_steps=20, progress=False)
+        assert np.max(np.abs(ens.ys[:, m] - one.ys)) <= 1e-13 * np.max(np.abs(y0))
+    comp = iso.solve(prob, iso.Composition(cayley(1e-8), "suzuki-4"), y0, dt=h, n_steps=20,
+                     progress=False)  # fmt: skip
+    assert "Cayley update" in comp.stats.runner
+    assert _eigenvalue_drift(alg, comp.ys) < 1e-13
+
+
+def test_bad_input_is_refused() -> None:
+    with pytest.raises(iso.ParameterError, match="update must be one of 'midpoint', 'cayley'"):
+        iso.IsoMP(update="exact")  # type: ignore[arg-type]
+    for prob, y0 in (
+        iso.models.heisenberg_chain(8, initial="random", seed=0),  # particles
+        (iso.IsospectralProblem(B=lambda W: W @ W, algebra=iso.algebras.gl(3)),
+         iso.algebras.gl(3).random(0, scale=0.3)),
+    ):  # fmt: skip
+        with pytest.raises(iso.ParameterError, match=r"update='cayley'\) needs a dense matrix"):
+            iso.solve(prob, cayley(), y0, dt=0.01, n_steps=2, progress=False)
+
+
+def test_the_name_keeps_a_run_on_its_update(tmp_path: Path) -> None:
+    assert cayley().name == "IsoMP (Cayley update)" and iso.IsoMP().name == "IsoMP"
+    prob, y0 = iso.models.rigid_body(n=5)
+    path = tmp_path / "mid.h5"
+    iso.solve(prob, iso.IsoMP(), y0, dt=0.1, n_steps=8, progress=False,
+              writer=io.HDF5Writer(path))  # fmt: skip
+    with pytest.raises(iso.ResultFileError, match="the run used 'IsoMP', not 'IsoMP \\(Cayley"):
+        io.resume(path, problem=prob, method=cayley(), progress=False)
