@@ -139,3 +139,20 @@ def test_the_name_keeps_a_run_on_its_update(tmp_path: Path) -> None:
               writer=io.HDF5Writer(path))  # fmt: skip
     with pytest.raises(iso.ResultFileError, match="the run used 'IsoMP', not 'IsoMP \\(Cayley"):
         io.resume(path, problem=prob, method=cayley(), progress=False)
+
+
+@pytest.mark.parametrize("N", [24, 130])
+def test_the_split_step_runs_it_compiled(N: int) -> None:
+    """``Strang(IsoMP(update="cayley"))`` with a viscosity: the compiled split stage with the
+    Cayley finish gives the NumPy path's states, and the flow of the midpoint split step."""
+    prob, y0 = iso.models.euler_sphere(N=N, seed=1, viscosity=1e-3)
+    h = float(0.3 / np.linalg.norm(prob.B(y0), 2))
+    method = iso.Strang(cayley(1e-8))
+    kw = dict(dt=h, n_steps=8 if N > 100 else 30, progress=False)
+    fast = iso.solve(prob, method, y0, **kw)
+    slow = iso.solve(dataclasses.replace(prob, kernel=None), method, y0, **kw)
+    assert fast.stats.runner.endswith("Strang split, Cayley update"), fast.stats.runner
+    assert slow.stats.runner == "NumPy"
+    assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12 * np.max(np.abs(y0))
+    plain = iso.solve(prob, iso.Strang(iso.IsoMP()), y0, **kw)  # the same flow
+    assert np.max(np.abs(fast.ys - plain.ys)) <= 1e-6 * np.max(np.abs(y0))

@@ -183,10 +183,16 @@ def register(method: type, stage: CompiledStage) -> None:
     _STAGES[method] = stage
 
 
+def _cayley(method: Any) -> bool:
+    return type(method) is IsoMP and method.update == "cayley"
+
+
 def stage_for(method: Any) -> CompiledStage | None:
     """The compiled stage of ``method`` (an instance), or ``None``."""
-    if type(method) is IsoMP and method.update == "cayley":
+    if _cayley(method):
         return _ISOMP_CAYLEY
+    if type(method) is Strang and _cayley(method.base):
+        return _SPLIT_CAYLEY
     return _STAGES.get(type(method))
 
 
@@ -289,10 +295,18 @@ def _dense_blas_split(layout: Layout) -> tuple[Any, Any]:
 
 
 def _split_applies(method: Strang, problem: Any, composed: bool) -> bool:
-    """``Strang(IsoMP())``; composed only when its step data are empty (steady forcing)."""
-    if type(method.base) is not IsoMP or method.base.update != "midpoint":
+    """``Strang(IsoMP())`` (either update: :func:`stage_for` picks the stage of the base's);
+    composed only when its step data are empty (steady forcing)."""
+    if type(method.base) is not IsoMP:
         return False
     return not composed or sum(data_widths(problem)) == 0
+
+
+def _dense_blas_split_cayley(layout: Layout) -> tuple[Any, Any]:
+    """The split step with the Cayley update on the BLAS layout."""
+    if layout.record.planar:
+        return dense_planar.iterate, split.finish_cayley_planar
+    return dense_tiles.iterate, split.finish_cayley_tiles
 
 
 register(
@@ -342,4 +356,19 @@ register(
             ),
         },
     ),
+)
+
+#: ``Strang(IsoMP(update="cayley"))``: the split stage with the Cayley finish, on the BLAS
+#: layout (elsewhere the NumPy path), as :data:`_ISOMP_CAYLEY` is IsoMP's.
+_SPLIT_CAYLEY = dataclasses.replace(
+    _STAGES[Strang],
+    name="Strang split, Cayley update",
+    needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
+    specializations={
+        DenseBlas: Specialization(
+            _dense_blas_split_cayley,
+            _dense_blas_rows,
+            "the split step's (benchmark 15) with the Cayley finish (benchmark 22)",
+        ),
+    },
 )

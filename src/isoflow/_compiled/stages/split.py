@@ -33,7 +33,7 @@ from numba.core import errors as numba_errors
 from numba.extending import overload
 from numpy.typing import NDArray
 
-from .. import blocks, dense_planar, dense_tiles
+from .. import blocks, cayley, dense_planar, dense_tiles
 
 __all__ = [
     "SPLIT_FIELDS",
@@ -46,6 +46,8 @@ __all__ = [
     "apply_flow",
     "begin",
     "finish",
+    "finish_cayley_planar",
+    "finish_cayley_tiles",
     "finish_planar",
     "finish_tiles",
     "params",
@@ -323,3 +325,19 @@ def params(method: Any, problem: Any, layout: Any, steps: tuple[float, ...]) -> 
         np.asarray(amp, dtype=np.int64).reshape(-1, 2),
         *flow,
     )
+
+
+@numba.njit(cache=True)
+def finish_cayley_tiles(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """:func:`finish` after the Cayley update on complex tiles or real states
+    (:func:`isoflow._compiled.cayley.finish_tiles`)."""
+    cayley.finish_tiles(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)
+    _half_step(mp, sd, Wn, h, 1)
+
+
+@numba.njit(cache=True)
+def finish_cayley_planar(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """:func:`finish` after the Cayley update in real planes
+    (:func:`isoflow._compiled.cayley.finish_planar`)."""
+    cayley.finish_planar(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)
+    _half_step(mp, sd, Wn, h, 1)
