@@ -586,6 +586,17 @@ def load(path: str | os.PathLike[str]) -> RunData:
 
     Every row read is checked against its checksum (format version 2).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The result file (as written by :class:`~isoflow.io.HDF5Writer`).
+
+    Returns
+    -------
+    RunData
+        Times, states, diagnostic series, the recorded configuration and metadata, the final
+        status and the Casimir drifts.
+
     Raises
     ------
     ResultFileError
