@@ -106,8 +106,10 @@ def random_vorticity(
     ----------
     N : int
         Matrix size.
-    lmin, lmax : int
-        The band of degrees (``lmin`` default 1; ``lmax`` default ``min(10, N - 1)``).
+    lmin : int
+        Lowest degree of the band (default 1).
+    lmax : int, optional
+        Highest degree of the band, at most ``N - 1`` (default ``min(10, N - 1)``).
     slope : float, optional
         Exponent of the expected energy spectrum :math:`E_l \propto l^{s}` (default
         ``None``: white in the band).
