@@ -282,8 +282,10 @@ class IsoSyRK(Method):
         h : float
             The step size.
         state : object, optional
-            Stage offsets of the previous step with its step size, for the extrapolated initial
-            guess; ``None`` (or another step size) starts from the collocation guess.
+            ``(h, D_1, ...)``: the stage offsets of the previous steps, used for the
+            extrapolated initial guess when stored with the same step size; without them the
+            guess is the explicit collocation guess (the state itself with
+            ``initial_guess="state"``).
 
         Returns
         -------

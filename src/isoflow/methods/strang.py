@@ -168,8 +168,9 @@ class Strang(Method):
         problem : IsospectralProblem
             The problem to advance.
         request : StepDataRequest
-            The steps, the members and the step size the data are for. The time of step ``k`` is
-            ``request.t0 + (k - 1) h``.
+            The steps, the members and the step size the data are for. Step ``k`` starts at
+            ``request.t0 + (k - 1) h``; the amplitudes are taken at the midpoints of its two
+            half steps.
 
         Returns
         -------
