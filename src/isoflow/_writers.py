@@ -51,7 +51,19 @@ class StreamWriter(Protocol):
     def checkpoint(
         self, step: int, y: Array, method_state: Any, failures: MemberFailures | None
     ) -> None:
-        """The state after ``step`` steps, the method state and the failure record."""
+        """The state after ``step`` steps, the method state and the failure record.
+
+        Parameters
+        ----------
+        step : int
+            Number of steps taken to reach ``y``.
+        y : ndarray, shape (*batch, *shape)
+            The state after ``step`` steps (after the last appended row).
+        method_state : object
+            The method's state (``None`` or a flat tuple of numbers and arrays).
+        failures : MemberFailures or None
+            Which ensemble members failed, when and why.
+        """
 
     def close(self, info: dict[str, Any]) -> None:
         """End the run; ``info`` holds the status, message and :class:`~isoflow.SolveStats`."""

@@ -257,7 +257,13 @@ class DiagnosticsAccumulator:
         self._series: list[dict[str, Array]] = []
 
     def set_first_state(self, y0: Array) -> None:
-        """Fix the Casimir scale from the first state (needed before :meth:`absorb`)."""
+        """Fix the Casimir scale from the first state (needed before :meth:`absorb`).
+
+        Parameters
+        ----------
+        y0 : ndarray, shape (*batch, *shape)
+            The first state of the run (drifts are relative to its Casimir scale).
+        """
         alg = self.problem.algebra
         self.drift = DriftAccumulator(alg.casimir_scale(y0), y0.ndim - alg.core_ndim)
 
@@ -270,7 +276,20 @@ class DiagnosticsAccumulator:
         return s
 
     def absorb(self, ts: Array, s: dict[str, Array]) -> None:
-        """Absorb already computed series (e.g. read back from a file when resuming)."""
+        """Absorb already computed series (e.g. read back from a file when resuming).
+
+        Parameters
+        ----------
+        ts : ndarray, shape (n,)
+            Times of the states.
+        s : dict of str to ndarray
+            Their series, as :meth:`update` returns them (name to array ``(n, ...)``).
+
+        Raises
+        ------
+        ValueError
+            Called before :meth:`set_first_state` or :meth:`update`.
+        """
         if self.drift is None:
             raise ValueError("absorb() needs set_first_state() or update() first")
         self.drift.absorb(ts, s)
@@ -317,7 +336,22 @@ class DiagnosticsAccumulator:
 
 
 def compute_diagnostics(problem: IsospectralProblem, ts: Array, ys: Array) -> Diagnostics:
-    """Diagnostics of the states ``ys`` (time-first, ``(n_save, *batch, *shape)``) at ``ts``."""
+    """Diagnostics of the states ``ys`` (time-first, ``(n_save, *batch, *shape)``) at ``ts``.
+
+    Parameters
+    ----------
+    problem : IsospectralProblem
+        The problem the states belong to (its space, Hamiltonian, invariants, observables).
+    ts : ndarray, shape (n_save,)
+        The times.
+    ys : ndarray, shape (n_save, *batch, *shape)
+        The states, time first; drifts are relative to the first.
+
+    Returns
+    -------
+    Diagnostics
+        With the full time series.
+    """
     acc = DiagnosticsAccumulator(problem, keep_series=True)
     acc.update(ts, ys)
     return acc.result()

@@ -81,7 +81,7 @@ def _members_first(source: Any) -> tuple[Array, Array, Array]:
 def ensemble_statistics(
     source: Any, observable: Callable[[Array], Array] | None = None
 ) -> EnsembleEstimate:
-    """Mean, variance and standard error of ``observable`` over the members, per saved time.
+    r"""Mean, variance and standard error of ``observable`` over the members, per saved time.
 
     Parameters
     ----------

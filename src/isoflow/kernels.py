@@ -92,6 +92,22 @@ class Kernel:
 
         Members are evaluated one by one by a compiled loop into a new array of the
         normalizer's dtype.
+
+        Parameters
+        ----------
+        W : array_like, shape (*batch, *algebra.shape)
+            The states.
+        algebra : Algebra
+            The problem's space (its shape and dtype, and its normalizer's dtype).
+
+        Returns
+        -------
+        ndarray, shape (*batch, *algebra.shape)
+
+        Raises
+        ------
+        ShapeError
+            ``W`` does not end in ``algebra.shape``.
         """
         return self._apply(W, algebra, 0.0)
 
@@ -114,7 +130,18 @@ class Kernel:
         return out.reshape(*batch, *core)
 
     def python_B(self, algebra: Algebra) -> Callable[[Array], Array]:
-        """A Python ``B`` (broadcasting over leading axes) that calls this kernel."""
+        """A Python ``B`` (broadcasting over leading axes) that calls this kernel.
+
+        Parameters
+        ----------
+        algebra : Algebra
+            The space ``B`` acts on, handed to :meth:`evaluate`.
+
+        Returns
+        -------
+        callable
+            ``B(W) -> array``, tagged with this kernel (``B.isoflow_kernel``).
+        """
 
         def B(W: Array) -> Array:
             return self.evaluate(W, algebra)
@@ -329,7 +356,19 @@ class ElementwiseLinear(Kernel):
             )
 
     def evaluate(self, W: ArrayLike, algebra: Algebra | None = None) -> Array:
-        """``C * W``, or ``U (C * (U^H W U)) U^H`` with a frame (NumPy)."""
+        """``C * W``, or ``U (C * (U^H W U)) U^H`` with a frame (NumPy).
+
+        Parameters
+        ----------
+        W : array_like, shape (*batch, *coeff.shape)
+            The states.
+        algebra : Algebra, optional
+            Unused (the formula needs no space); accepted for the :class:`Kernel` interface.
+
+        Returns
+        -------
+        ndarray, shape (*batch, *coeff.shape)
+        """
         Wa = np.asarray(W)
         if self.frame is None:
             return self.coeff * Wa
@@ -376,7 +415,19 @@ class SpinNeighbourSum(Kernel):
             )
 
     def evaluate(self, W: ArrayLike, algebra: Algebra | None = None) -> Array:
-        """``c (w_{i-1} + w_{i+1})`` over the particle axis (NumPy)."""
+        """``c (w_{i-1} + w_{i+1})`` over the particle axis (NumPy), periodic.
+
+        Parameters
+        ----------
+        W : array_like, shape (*batch, N, 3)
+            Spins.
+        algebra : Algebra, optional
+            Unused; accepted for the :class:`Kernel` interface.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
+        """
         Wa = np.asarray(W, dtype=np.float64)
         return self.coupling * (np.roll(Wa, 1, axis=-2) + np.roll(Wa, -1, axis=-2))
 
@@ -480,7 +531,25 @@ class PairwiseVortex(Kernel):
             )
 
     def evaluate(self, W: ArrayLike, algebra: Algebra | None = None) -> Array:
-        """``B(W)`` for ``W`` of shape ``(*batch, N, 3)`` (NumPy)."""
+        """``B(W)`` for ``W`` of shape ``(*batch, N, 3)`` (NumPy).
+
+        Parameters
+        ----------
+        W : array_like, shape (*batch, N, 3)
+            Vortex positions, one row per vortex.
+        algebra : Algebra, optional
+            Unused (the geometry is the kernel's own); accepted for the :class:`Kernel`
+            interface.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
+
+        Raises
+        ------
+        ShapeError
+            ``W`` does not end in ``(N, 3)``.
+        """
         Wa = np.asarray(W, dtype=np.float64)
         N = self.N
         if Wa.ndim < 2 or Wa.shape[-2:] != (N, 3):

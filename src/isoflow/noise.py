@@ -235,7 +235,19 @@ def _normals_from_words(raw: NDArray[np.uint64], out: Array, clip: float | None)
 def truncation_level(h: float, k: float = 2.0) -> float:
     r""":math:`A_h = \sqrt{2k \max(|\ln h|, 1)}`: where :func:`brownian_increments` clips the
     normals (Milstein–Repin–Tretyakov; the floor keeps a level of at least :math:`\sqrt{2k}`
-    for steps above ``1/e``)."""
+    for steps above ``1/e``).
+
+    Parameters
+    ----------
+    h : float
+        The step size (positive).
+    k : float
+        The truncation parameter (default 2).
+
+    Returns
+    -------
+    float
+    """
     return math.sqrt(2.0 * k * max(abs(math.log(h)), 1.0))
 
 
@@ -248,6 +260,36 @@ def brownian_increments(
 
     ``truncation = k`` clips ``zeta`` to :math:`\pm A_h` (:func:`truncation_level`); ``None``
     draws untruncated normals.
+
+    Parameters
+    ----------
+    seed : int
+        The noise seed (an integer ``>= 0``).
+    members : array_like of int
+        The members' ids (keys of their paths); ids ``< 0`` (padding) get zeros.
+    k0 : int
+        Steps before the first one drawn (``>= 0``).
+    nsteps : int
+        Number of steps (``>= 0``).
+    count : int
+        Brownian motions per member (``>= 0``).
+    h : float
+        The step size (positive, finite).
+    stream : int
+        The Philox stream (an integer ``>= 0``; default ``TRANSPORT_STREAM = 0``, the
+        transport noise; forcings use :data:`isoflow.splitting.FORCING_STREAM`).
+    truncation : float or None
+        ``k`` of :func:`truncation_level` (default 2), or ``None`` for no clipping.
+
+    Returns
+    -------
+    ndarray, shape (nsteps, len(members), count)
+
+    Raises
+    ------
+    ParameterError
+        A non-positive or non-finite ``h``, a bad ``truncation``, or what
+        :func:`standard_normals` refuses.
     """
     if not (isinstance(h, (int, float, np.floating)) and math.isfinite(h) and h > 0):
         raise ParameterError(f"the step h must be positive and finite, got {h!r}")
@@ -409,6 +451,13 @@ class TransportNoise:
         """Raise if a callable ``fields`` does not give ``m`` fields of the normalizer per
         member at the states ``W`` (``(*batch, *shape)``), as a step would use them.
 
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            States of the problem.
+        algebra : Algebra
+            The problem's space (the fields must lie in its normalizer).
+
         Raises
         ------
         ShapeError, InvalidBError
@@ -434,15 +483,45 @@ class TransportNoise:
         _in_normalizer(F.reshape(-1, *norm.shape), algebra, "field {} of the fields function")
 
     def particles(self, algebra: Algebra) -> int:
-        """Particles with site noise (``0`` without)."""
+        """Particles with site noise (``0`` without).
+
+        Parameters
+        ----------
+        algebra : Algebra
+            The problem's space (its shape gives the number of particles ``N``).
+
+        Returns
+        -------
+        int
+        """
         return 0 if self.site is None else int(algebra.shape[0])
 
     def dimension(self, algebra: Algebra) -> int:
-        """Brownian motions per member: ``m`` plus three per particle of site noise."""
+        """Brownian motions per member: ``m`` plus three per particle of site noise.
+
+        Parameters
+        ----------
+        algebra : Algebra
+            The problem's space (its shape gives the number of particles ``N``).
+
+        Returns
+        -------
+        int
+        """
         return int(self.count or 0) + 3 * self.particles(algebra)
 
     def site_amplitudes(self, algebra: Algebra) -> Array:
-        """:math:`\\sigma_p` per particle, ``(N,)`` (empty without site noise)."""
+        """:math:`\\sigma_p` per particle, ``(N,)`` (empty without site noise).
+
+        Parameters
+        ----------
+        algebra : Algebra
+            The problem's space (its shape gives the number of particles ``N``).
+
+        Returns
+        -------
+        ndarray, shape (N,) or (0,)
+        """
         P = self.particles(algebra)
         if P == 0:
             return np.zeros(0)
@@ -471,7 +550,22 @@ class TransportNoise:
     # ---- evaluation (NumPy) ----------------------------------------------------------------
     def increment(self, W: Array, dbeta: Array, algebra: Algebra) -> Array:
         r""":math:`\sum_i \Delta\beta_i B_i(W)` (site noise included), ``(*batch,
-        *normalizer.shape)``, for the increments ``dbeta`` ``(*batch, dimension)``."""
+        *normalizer.shape)``, for the increments ``dbeta`` ``(*batch, dimension)``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            The states (where callable fields are evaluated).
+        dbeta : ndarray, shape (*batch, dimension)
+            The Brownian increments: the ``m`` fields' first, then three per particle of site
+            noise.
+        algebra : Algebra
+            The problem's space.
+
+        Returns
+        -------
+        ndarray, shape (*batch, *normalizer.shape)
+        """
         norm = algebra.normalizer
         batch = algebra.batch_shape(W)
         m = int(self.count or 0)

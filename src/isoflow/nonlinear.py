@@ -225,6 +225,19 @@ class NonlinearSolver:
 
         Overflow and NaN in a diverging member are reported by its status, not as NumPy
         warnings.
+
+        Parameters
+        ----------
+        prob : FixedPointProblem
+            The map ``G``, its space, the scale of the tolerances and (for Newton) the
+            Jacobian-vector product.
+        X0 : ndarray, shape (*batch, *shape)
+            The initial guess (one member or an ensemble; not modified).
+
+        Returns
+        -------
+        NonlinearResult
+            The solution and, per member, the iterations, the residual and the status.
         """
         with np.errstate(over="ignore", invalid="ignore"):
             if prob.algebra.batch_shape(X0) == ():

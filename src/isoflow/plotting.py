@@ -25,7 +25,18 @@ __all__ = ["plot_experiment", "plot_run", "save"]
 
 
 def plot_experiment(res: ExperimentResult) -> Figure:
-    """The paper-style figure of an experiment's result."""
+    """The paper-style figure of an experiment's result.
+
+    Parameters
+    ----------
+    res : ExperimentResult
+        What :meth:`Experiment.run <isoflow.experiments.Experiment.run>` returned; its
+        ``name`` selects the figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     from .experiments import figure
 
     return figure(res)  # type: ignore[no-any-return]

@@ -246,6 +246,19 @@ class IsospectralProblem:
     def check_B(self, W: Array, rtol: float = 1e-8) -> Array:
         """Evaluate ``B(W)`` once and check shape, dtype, finiteness and normalizer membership.
 
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            States where ``B`` is evaluated (e.g. the initial state).
+        rtol : float
+            Relative tolerance of the membership test: ``B(W)`` may be at most
+            ``1e-12 + rtol * norm(B(W))`` away from the normalizer (default ``1e-8``).
+
+        Returns
+        -------
+        ndarray
+            ``B(W)`` in the normalizer's dtype.
+
         Raises
         ------
         InvalidBError
@@ -370,6 +383,28 @@ class IsospectralProblem:
         flow is :math:`\dot w_i = w_i \times \nabla_i H` on :math:`(\mathbb{R}^3,\times)^N`
         (:math:`\dot w_i = w_i \times_L L \nabla_i H` on :math:`\mathfrak{sl}(2)^N`), twice as
         fast as the matrix Lie–Poisson flow of the same ``H``.
+
+        Parameters
+        ----------
+        algebra : Algebra
+            The space ``V``; it must have a ``dagger`` method.
+        hamiltonian : callable
+            ``H(W) -> (*batch,)``: the energy, recorded with the problem (the energy
+            diagnostic); the flow uses ``gradient`` only.
+        gradient : callable
+            ``gradient(W) -> (*batch, *shape)``: :math:`\nabla H(W)` in ``algebra.inner``.
+        **kwargs
+            Further arguments of :class:`IsospectralProblem` (e.g. ``vectorized``,
+            ``B_jvp``, ``parameters``).
+
+        Returns
+        -------
+        IsospectralProblem
+
+        Raises
+        ------
+        ArgumentTypeError
+            ``algebra`` has no ``dagger``.
         """
         dagger = getattr(algebra, "dagger", None)
         if dagger is None:

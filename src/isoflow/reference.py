@@ -29,6 +29,27 @@ def dop853(
     preserved), with adaptive steps at the tolerances given; one evaluation of the vector field
     :math:`[B(W), W]` is one evaluation of ``B`` (per member).
 
+    Parameters
+    ----------
+    problem : IsospectralProblem
+        The problem (its linear part, forcing and noise, if any, are not integrated: only
+        :math:`[B(W), W]`).
+    y0 : array_like, shape (*batch, *shape)
+        The initial state at ``t0``, one member or an ensemble (checked to lie in the space).
+    t_eval : array_like, shape (n_t,)
+        The output times (increasing from ``t0``; the integration ends at the last one).
+    t0 : float
+        The initial time (default 0).
+    rtol, atol : float
+        Relative and absolute tolerances of DOP853 (default ``1e-13`` each).
+
+    Returns
+    -------
+    W : ndarray, shape (n_t, *batch, *shape)
+        The states at ``t_eval``.
+    nfev : int
+        The number of evaluations of the vector field.
+
     Raises
     ------
     IsoflowError
@@ -70,5 +91,27 @@ def reference_solution(
     The state (one member or an ensemble) is integrated in its real flat representation, as a
     generic ODE with no structure preserved: an independent check of the structure-preserving
     methods. Returns an array of shape ``(len(t_eval), *y0.shape)``.
+
+    Parameters
+    ----------
+    problem : IsospectralProblem
+        The problem (only :math:`[B(W), W]` is integrated).
+    y0 : array_like, shape (*batch, *shape)
+        The initial state at ``t0``.
+    t_eval : array_like, shape (n_t,)
+        The output times (the integration ends at the last one).
+    t0 : float
+        The initial time (default 0).
+    rtol, atol : float
+        Relative and absolute tolerances of DOP853 (default ``1e-13`` each).
+
+    Returns
+    -------
+    ndarray, shape (n_t, *batch, *shape)
+
+    Raises
+    ------
+    IsoflowError
+        The integration failed.
     """
     return dop853(problem, y0, t_eval, t0=t0, rtol=rtol, atol=atol)[0]

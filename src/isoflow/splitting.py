@@ -80,13 +80,39 @@ FORCING_STREAM = 1
 
 
 def decay_factors(rates: ArrayLike, tau: float) -> Array:
-    r""":math:`e^{-c\tau}` per rate ``c``."""
+    r""":math:`e^{-c\tau}` per rate ``c``.
+
+    Parameters
+    ----------
+    rates : array_like
+        The rates :math:`c \ge 0` (any shape).
+    tau : float
+        The time span.
+
+    Returns
+    -------
+    ndarray
+        Of the shape of ``rates``.
+    """
     return np.exp(-np.asarray(rates, dtype=float) * tau)
 
 
 def phi_factors(rates: ArrayLike, tau: float) -> Array:
     r""":math:`\int_0^\tau e^{-cs}\,ds = (1 - e^{-c\tau})/c` per rate (``tau`` where ``c = 0``),
-    computed as ``-expm1(-c tau)/c`` (no cancellation for small ``c tau``)."""
+    computed as ``-expm1(-c tau)/c`` (no cancellation for small ``c tau``).
+
+    Parameters
+    ----------
+    rates : array_like
+        The rates :math:`c \ge 0` (any shape).
+    tau : float
+        The time span.
+
+    Returns
+    -------
+    ndarray
+        Of the shape of ``rates``.
+    """
     c = np.asarray(rates, dtype=float)
     safe = np.where(c > 0, c, 1.0)
     return np.where(c > 0, -np.expm1(-c * tau) / safe, tau)
@@ -94,7 +120,20 @@ def phi_factors(rates: ArrayLike, tau: float) -> Array:
 
 def ou_scales(rates: ArrayLike, tau: float) -> Array:
     r"""The standard deviation per unit :math:`\sigma` of the Ornstein–Uhlenbeck increment over
-    ``tau``: :math:`\sqrt{(1 - e^{-2c\tau})/(2c)}` (:math:`\sqrt\tau` where ``c = 0``)."""
+    ``tau``: :math:`\sqrt{(1 - e^{-2c\tau})/(2c)}` (:math:`\sqrt\tau` where ``c = 0``).
+
+    Parameters
+    ----------
+    rates : array_like
+        The rates :math:`c \ge 0` (any shape).
+    tau : float
+        The time span.
+
+    Returns
+    -------
+    ndarray
+        Of the shape of ``rates``.
+    """
     c = np.asarray(rates, dtype=float)
     safe = np.where(c > 0, c, 1.0)
     return np.sqrt(np.where(c > 0, -np.expm1(-2.0 * c * tau) / (2.0 * safe), tau))
@@ -164,7 +203,20 @@ class LinearPart(ABC):
 
     @abstractmethod
     def compiled(self, taus: Sequence[float], algebra: Algebra) -> Any:
-        """The record the compiled split stage applies for the half steps ``taus``."""
+        """The record the compiled split stage applies for the half steps ``taus``.
+
+        Parameters
+        ----------
+        taus : sequence of float
+            The lengths of the half steps of one step.
+        algebra : Algebra
+            The problem's space (its shape and dtype).
+
+        Returns
+        -------
+        object
+            The record of :mod:`isoflow._compiled.stages.split` for these half steps.
+        """
 
     def describe(self) -> dict[str, Any]:
         """What identifies the part (recorded with results)."""
@@ -248,6 +300,21 @@ class ModalLinearPart(LinearPart):
         return np.asarray(self.basis[np.asarray(index, dtype=np.int64)])
 
     def compiled(self, taus: Sequence[float], algebra: Algebra) -> Any:
+        r"""The modal flow of the half steps ``taus``: the basis flattened and the factors
+        :math:`e^{-c_j\tau} - 1`.
+
+        Parameters
+        ----------
+        taus : sequence of float
+            The lengths of the half steps of one step.
+        algebra : Algebra
+            The problem's space (the basis is flattened to its size, in its dtype).
+
+        Returns
+        -------
+        object
+            A ``ModalFlow`` record of :mod:`isoflow._compiled.stages.split`.
+        """
         from ._compiled.stages.split import ModalFlow
 
         S = int(np.prod(algebra.shape))
@@ -394,7 +461,21 @@ def split_terms(problem: IsospectralProblem) -> tuple[Deterministic, Stochastic]
 
 
 def half_step(problem: IsospectralProblem, tau: float) -> HalfStep:
-    """The forcing terms of a half step of length ``tau`` (precomputed once per step size)."""
+    """The forcing terms of a half step of length ``tau`` (precomputed once per step size).
+
+    Parameters
+    ----------
+    problem : IsospectralProblem
+        A problem with a forcing (and possibly a linear part; a stochastic forcing needs one).
+    tau : float
+        The length of the half step.
+
+    Returns
+    -------
+    HalfStep
+        The steady forcing's response, the responses of the time-dependent patterns, and the
+        noise modes scaled by their Ornstein–Uhlenbeck standard deviations (sparse).
+    """
     lin = problem.linear_part
     det, sto = split_terms(problem)
 

@@ -78,7 +78,17 @@ class Algebra(ABC):
 
     @abstractmethod
     def project(self, W: Array) -> Array:
-        """Orthogonal projection onto ``V`` in the pairing :meth:`inner`."""
+        """Orthogonal projection onto ``V`` in the pairing :meth:`inner`.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            Elements of the ambient space (for matrix spaces, any ``n x n`` matrices).
+
+        Returns
+        -------
+        ndarray, shape (*batch, *shape)
+        """
 
     @abstractmethod
     def bracket(self, A: Array, X: Array) -> Array:
@@ -93,10 +103,32 @@ class Algebra(ABC):
 
     @abstractmethod
     def casimirs(self, W: Array) -> Array:
-        """Invariants of every isospectral flow on ``V``, shape ``(*batch, m)``."""
+        """Invariants of every isospectral flow on ``V``, shape ``(*batch, m)``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            Elements of ``V``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, m)
+        """
 
     def casimir_scale(self, W0: Array) -> Array:
-        """Natural size of each Casimir component at ``W0``, to make drifts relative."""
+        """Natural size of each Casimir component at ``W0``, to make drifts relative.
+
+        Parameters
+        ----------
+        W0 : ndarray, shape (*batch, *shape)
+            Elements of ``V`` (the initial states).
+
+        Returns
+        -------
+        ndarray, shape (*batch, m)
+            By default the :meth:`norm` of ``W0`` (at least the smallest positive float) for
+            every component of :meth:`casimirs`.
+        """
         C = self.casimirs(W0)
         norm = np.maximum(self.norm(W0), np.finfo(float).tiny)
         return np.broadcast_to(norm[..., None], C.shape)
@@ -116,6 +148,11 @@ class Algebra(ABC):
         the compact vector forms return one small matrix per particle,
         shape ``(*batch, N, k, k)``.
 
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            Elements of ``V`` or of its normalizer.
+
         Raises
         ------
         UnsupportedAlgebraError
@@ -124,7 +161,18 @@ class Algebra(ABC):
         raise UnsupportedAlgebraError(f"{self.name} has no matrix representation")
 
     def from_matrix(self, M: Array) -> Array:
-        """Inverse of :meth:`to_matrix` on its image (not projected: callers project)."""
+        """Inverse of :meth:`to_matrix` on its image (not projected: callers project).
+
+        Parameters
+        ----------
+        M : ndarray
+            Matrices of the shape :meth:`to_matrix` returns.
+
+        Raises
+        ------
+        UnsupportedAlgebraError
+            The space has no matrix representation.
+        """
         raise UnsupportedAlgebraError(f"{self.name} has no matrix representation")
 
     # ---- derived machinery ----------------------------------------------------------------
@@ -149,7 +197,19 @@ class Algebra(ABC):
         return int(self.basis_matrix.shape[0])
 
     def batch_shape(self, W: Array) -> tuple[int, ...]:
-        """Leading (ensemble) axes of an array of elements."""
+        """Leading (ensemble) axes of an array of elements.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            Elements (only the shape is read; the trailing :attr:`core_ndim` axes are
+            dropped, whatever their lengths).
+
+        Returns
+        -------
+        tuple of int
+            ``batch``.
+        """
         return tuple(W.shape[: W.ndim - self.core_ndim])
 
     def inner(self, A: Array, X: Array) -> Array:
@@ -163,7 +223,17 @@ class Algebra(ABC):
         return np.real(np.sum(np.conj(A) * X, axis=axes))
 
     def norm(self, W: Array) -> Array:
-        """Norm induced by :meth:`inner` (the Frobenius norm for matrices), per member."""
+        """Norm induced by :meth:`inner` (the Frobenius norm for matrices), per member.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            Elements (of ``V`` or of the ambient space).
+
+        Returns
+        -------
+        ndarray, shape (*batch,)
+        """
         axes = tuple(range(-self.core_ndim, 0))
         return np.sqrt(np.sum(np.abs(W) ** 2, axis=axes))
 
@@ -260,7 +330,23 @@ class Algebra(ABC):
         return c
 
     def from_coords(self, coords: ArrayLike) -> Array:
-        """The element of ``V`` with the given coordinates, shape ``(*batch, *shape)``."""
+        """The element of ``V`` with the given coordinates, shape ``(*batch, *shape)``.
+
+        Parameters
+        ----------
+        coords : array_like, shape (*batch, dim)
+            Coordinates in the orthonormal basis of ``V`` (:attr:`basis_matrix`), converted to
+            float.
+
+        Returns
+        -------
+        ndarray, shape (*batch, *shape)
+
+        Raises
+        ------
+        ShapeError
+            The last axis of ``coords`` is not of length :attr:`dim`.
+        """
         c = self._coords_array(coords)
         basis, basis_t = self._coordinate_maps
         rows = c.reshape(-1, self.dim)
@@ -284,6 +370,23 @@ class Algebra(ABC):
         they are (in the algebra's dtype): a restart continues from exactly the state a run
         held, and a projection is not idempotent in floating point for every space (the
         trace removal of ``su(n)`` is not).
+
+        Parameters
+        ----------
+        W : array_like, shape (*batch, *shape)
+            The element(s) to check.
+        what : str
+            Names ``W`` in the error messages (default ``"state"``).
+        rtol, atol : float
+            Relative and absolute tolerance of the distance to ``V`` (defaults ``1e-10`` and
+            ``1e-12``).
+        project : bool
+            Whether to return the projection onto ``V`` (default) or the checked values.
+
+        Returns
+        -------
+        ndarray, shape (*batch, *shape)
+            ``W`` in the algebra's dtype, projected unless ``project=False``.
 
         Raises
         ------
@@ -346,6 +449,20 @@ class MatrixAlgebra(Algebra):
       and it lies in ``V`` exactly. The triple product is ``P B``, a second product.
 
     Subclasses set ``sigma`` (or ``None`` for ``gl(n)``), the normalizer and the Casimirs.
+
+    Parameters
+    ----------
+    n : int
+        Matrix size (a positive integer).
+    dtype : numpy dtype
+        Dtype of the elements (``float64`` for real, ``complex128`` for complex spaces).
+    name : str
+        Name of the space in messages and records (e.g. ``"so(3)"``).
+
+    Raises
+    ------
+    ParameterError
+        ``n`` is not a positive integer.
     """
 
     #: Whether elements have zero trace on top of ``sigma(X) = X``.
@@ -366,9 +483,31 @@ class MatrixAlgebra(Algebra):
 
     @abstractmethod
     def sigma(self, Y: Array) -> Array:
-        """The involution defining ``V`` (exact in floating point)."""
+        """The involution defining ``V`` (exact in floating point).
+
+        Parameters
+        ----------
+        Y : ndarray, shape (*batch, n, n)
+            Matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
 
     def project(self, W: Array) -> Array:
+        r"""The exact projection :math:`(W + \sigma(W))/2` onto ``V`` (trace removed where
+        :attr:`traceless`).
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, n, n)
+            Matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
         P = 0.5 * (W + self.sigma(W))
         if self.traceless:
             tr = np.trace(P, axis1=-2, axis2=-1) / self.n
@@ -411,15 +550,37 @@ class MatrixAlgebra(Algebra):
         return A @ X - X @ A
 
     def to_matrix(self, W: Array) -> Array:
-        """The matrices themselves."""
+        """The matrices themselves.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, n, n)
+            Elements of ``V`` or of its normalizer.
+        """
         return np.asarray(W)
 
     def from_matrix(self, M: Array) -> Array:
-        """The matrices themselves (not projected)."""
+        """The matrices themselves (not projected).
+
+        Parameters
+        ----------
+        M : ndarray, shape (*batch, n, n)
+            Matrices.
+        """
         return np.asarray(M)
 
     def dagger(self, Y: Array) -> Array:
-        """Conjugate transpose over the last two axes."""
+        """Conjugate transpose over the last two axes.
+
+        Parameters
+        ----------
+        Y : ndarray, shape (*batch, n, n)
+            Matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
         return np.conj(np.swapaxes(Y, -1, -2))
 
     def bracket_and_triple(self, B: Array, X: Array) -> tuple[Array, Array]:

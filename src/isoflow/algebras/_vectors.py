@@ -47,6 +47,15 @@ class ParticleVectors(Algebra):
 
         Complex input is mapped to its real part (the orthogonal projection of the
         complexification onto the real space).
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            Vectors, one per particle.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
         """
         W = np.asarray(W)
         if np.iscomplexobj(W):
@@ -55,7 +64,17 @@ class ParticleVectors(Algebra):
 
     def casimir_scale(self, W0: Array) -> Array:
         r"""Scale of the per-particle quadratic Casimirs: the Euclidean :math:`|w_i|^2`
-        (a particle at the origin uses the largest one), the size of their rounding errors."""
+        (a particle at the origin uses the largest one), the size of their rounding errors.
+
+        Parameters
+        ----------
+        W0 : ndarray, shape (*batch, N, 3)
+            The initial states.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N)
+        """
         sq = np.einsum("...i,...i->...", W0, W0)
         fallback = np.max(sq, axis=-1, keepdims=True) if sq.ndim else sq
         fallback = np.where(fallback > 0, fallback, 1.0)

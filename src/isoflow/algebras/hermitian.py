@@ -31,9 +31,32 @@ class Hermitian(MatrixAlgebra):
     transpose_sign = 1
 
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
+        r"""The conjugate transpose :math:`Y^\dagger`.
+
+        Parameters
+        ----------
+        Y : ndarray, shape (*batch, n, n)
+            Complex matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
         return np.conj(np.swapaxes(Y, -1, -2))
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
+        """The eigenvalues of ``W`` in ascending order.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, n, n)
+            Hermitian matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n)
+            Real.
+        """
         return eigvalsh(W)
 
 

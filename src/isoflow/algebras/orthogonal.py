@@ -31,9 +31,32 @@ class SpecialOrthogonal(MatrixAlgebra):
     transpose_sign = -1
 
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
+        """Minus the transpose, :math:`-Y^T`.
+
+        Parameters
+        ----------
+        Y : ndarray, shape (*batch, n, n)
+            Real matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
         return -np.swapaxes(Y, -1, -2)
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
+        r"""The eigenvalues of the Hermitian matrix :math:`iW`, in ascending order.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, n, n)
+            Real skew-symmetric matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n)
+            Real, in pairs :math:`\pm\lambda` (and a zero for odd ``n``).
+        """
         return skew_eigvalsh(W)
 
 

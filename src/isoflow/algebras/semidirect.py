@@ -148,7 +148,32 @@ class _Pairs:
         self, W: ArrayLike, what: str = "state", rtol: float = 1e-10, atol: float = 1e-12,
         *, project: bool = True,
     ) -> Array:  # fmt: skip
-        """:meth:`Algebra.validate`, with a state outside the space blamed on its field."""
+        """:meth:`Algebra.validate`, with a state outside the space blamed on its field.
+
+        Parameters
+        ----------
+        W : array_like, shape (*batch, 2, *field_shape)
+            The pair(s) to check.
+        what : str
+            Names ``W`` in the error messages (default ``"state"``).
+        rtol, atol : float
+            Relative and absolute tolerance of the distance to the space (defaults ``1e-10``
+            and ``1e-12``).
+        project : bool
+            Whether to return the projection onto the space (default) or the checked values.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2, *field_shape)
+
+        Raises
+        ------
+        NotInSpaceError
+            A pair too far from the space; the message names the field farthest from its
+            space.
+        DtypeError, ShapeError, NonFiniteError
+            As :meth:`Algebra.validate`.
+        """
         try:
             return super().validate(W, what, rtol, atol, project=project)  # type: ignore[misc, no-any-return]
         except NotInSpaceError as exc:
@@ -223,7 +248,17 @@ class SemidirectProduct(_Pairs, Algebra):
         return 2 * self.base.dim
 
     def project(self, W: Array) -> Array:
-        """The base's orthogonal projection on each field."""
+        """The base's orthogonal projection on each field.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, 2, n, n)
+            Pairs of matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2, n, n)
+        """
         return self._copies.project(W)
 
     def _field_distance(self, F: Array) -> Array:
@@ -244,7 +279,17 @@ class SemidirectProduct(_Pairs, Algebra):
 
     def casimirs(self, W: Array) -> Array:
         """``(*batch, 2n)``: the spectrum of ``i Theta``, then the cross family (class
-        docstring)."""
+        docstring).
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, 2, n, n)
+            Pairs ``(Theta, W)``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2n)
+        """
         from .._eig import eigh_diagonal
 
         theta, w = self.split(np.asarray(W))
@@ -255,7 +300,18 @@ class SemidirectProduct(_Pairs, Algebra):
         return np.concatenate([lam, np.einsum("...ki,...i->...k", powers, d)], axis=-1)
 
     def casimir_scale(self, W0: Array) -> Array:
-        """``||Theta_0||`` for the spectrum, ``||(Theta_0, W_0)||`` for the cross family."""
+        """``||Theta_0||`` for the spectrum, ``||(Theta_0, W_0)||`` for the cross family.
+
+        Parameters
+        ----------
+        W0 : ndarray, shape (*batch, 2, n, n)
+            The initial pairs.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2n)
+            Each at least the smallest positive float.
+        """
         theta, _ = self.split(np.asarray(W0))
         tiny = np.finfo(float).tiny
         n = self.base.n
@@ -270,11 +326,28 @@ class SemidirectProduct(_Pairs, Algebra):
         return self._copies.to_coords(W)
 
     def from_coords(self, coords: ArrayLike) -> Array:
+        """The pairs with the given coordinates (those of the two fields, one after the other).
+
+        Parameters
+        ----------
+        coords : array_like, shape (*batch, dim)
+            Coordinates in the orthonormal basis, ``dim = 2 base.dim``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2, n, n)
+        """
         return self._copies.from_coords(coords)
 
     def to_matrix(self, W: Array) -> Array:
         r"""The block matrices :math:`\begin{pmatrix}X_0 & X_1\\ 0 & X_0\end{pmatrix}`,
-        ``(*batch, 2n, 2n)``: their products are the dual-number products."""
+        ``(*batch, 2n, 2n)``: their products are the dual-number products.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, 2, n, n)
+            Pairs ``(X_0, X_1)`` (states or values of ``B``).
+        """
         X0, X1 = self.split(np.asarray(W))
         zero = np.zeros_like(X0)
         top = np.concatenate([X0, X1], axis=-1)
@@ -282,7 +355,17 @@ class SemidirectProduct(_Pairs, Algebra):
 
     def from_matrix(self, M: Array) -> Array:
         """The pair of a block matrix (the mean of the two diagonal blocks, the upper right
-        block; not projected)."""
+        block; not projected).
+
+        Parameters
+        ----------
+        M : ndarray, shape (*batch, 2n, 2n)
+            Block matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2, n, n)
+        """
         n = self.base.n
         Ma = np.asarray(M)
         X0 = 0.5 * (Ma[..., :n, :n] + Ma[..., n:, n:])
@@ -330,13 +413,33 @@ class SE3Vectors(_Pairs, ParticleVectors):
         return -np.asarray(G)
 
     def bracket(self, A: Array, X: Array) -> Array:
-        """``(a0 x x0, a0 x x1 + a1 x x0)``."""
+        """``(a0 x x0, a0 x x1 + a1 x x0)``.
+
+        Parameters
+        ----------
+        A, X : ndarray, shape (*batch, 2, 3)
+            Pairs of vectors.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2, 3)
+        """
         a0, a1 = self.split(A)
         x0, x1 = self.split(X)
         return self.pair(cross(a0, x0), cross(a0, x1) + cross(a1, x0))
 
     def bracket_and_triple(self, B: Array, X: Array) -> tuple[Array, Array]:
-        """The bracket and the dual triple product (class docstring)."""
+        """The bracket and the dual triple product (class docstring).
+
+        Parameters
+        ----------
+        B, X : ndarray, shape (*batch, 2, 3)
+            Pairs of vectors: a value of ``B`` and a state.
+
+        Returns
+        -------
+        (ndarray, ndarray), each of shape (*batch, 2, 3)
+        """
         b0, b1 = self.split(B)
         x0, x1 = self.split(X)
         bx0 = dot(b0, x0)[..., None]
@@ -344,12 +447,32 @@ class SE3Vectors(_Pairs, ParticleVectors):
         return self.bracket(B, X), T
 
     def casimirs(self, W: Array) -> Array:
-        r"""``(*batch, 2)``: :math:`|\Gamma|^2` and :math:`M\cdot\Gamma`."""
+        r"""``(*batch, 2)``: :math:`|\Gamma|^2` and :math:`M\cdot\Gamma`.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, 2, 3)
+            Pairs ``(Gamma, M)``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2)
+        """
         g, m = self.split(np.asarray(W))
         return np.stack([dot(g, g), dot(m, g)], axis=-1)
 
     def casimir_scale(self, W0: Array) -> Array:
-        r""":math:`|\Gamma_0|^2` and :math:`|\Gamma_0|\,|(\Gamma_0, M_0)|` (at least ``tiny``)."""
+        r""":math:`|\Gamma_0|^2` and :math:`|\Gamma_0|\,|(\Gamma_0, M_0)|` (at least ``tiny``).
+
+        Parameters
+        ----------
+        W0 : ndarray, shape (*batch, 2, 3)
+            The initial pairs ``(Gamma_0, M_0)``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2)
+        """
         g, _ = self.split(np.asarray(W0))
         ng = np.sqrt(dot(g, g))
         tiny = np.finfo(float).tiny
@@ -357,7 +480,17 @@ class SE3Vectors(_Pairs, ParticleVectors):
 
     def to_matrix(self, W: Array) -> Array:
         r"""The ``6 x 6`` block matrices :math:`\begin{pmatrix}\hat\Gamma & \hat M\\ 0 &
-        \hat\Gamma\end{pmatrix}`."""
+        \hat\Gamma\end{pmatrix}`.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, 2, 3)
+            Pairs ``(Gamma, M)`` (or values of ``B``).
+
+        Returns
+        -------
+        ndarray, shape (*batch, 6, 6)
+        """
         g, m = self.split(np.asarray(W))
         G, M = hat(g), hat(m)
         top = np.concatenate([G, M], axis=-1)
@@ -365,7 +498,17 @@ class SE3Vectors(_Pairs, ParticleVectors):
 
     def from_matrix(self, M: Array) -> Array:
         """The pair of a block matrix (vectors of the skew parts, the diagonal blocks
-        averaged)."""
+        averaged).
+
+        Parameters
+        ----------
+        M : ndarray, shape (*batch, 6, 6)
+            Block matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2, 3)
+        """
         Ma = np.asarray(M)
         g = vee(0.5 * (Ma[..., :3, :3] + Ma[..., 3:, 3:]))
         return self.pair(g, vee(Ma[..., :3, 3:]))

@@ -134,24 +134,66 @@ class SL2Vectors(ParticleVectors):
         return (-2.0 * L_DIAG) * cross(B, X), 2.0 * bx * B - bb * X
 
     def dagger(self, G: Array) -> Array:
-        r"""Vector form of the matrix transpose: :math:`\varphi(g)^T = \varphi(L g)`."""
+        r"""Vector form of the matrix transpose: :math:`\varphi(g)^T = \varphi(L g)`.
+
+        Parameters
+        ----------
+        G : ndarray, shape (*batch, N, 3)
+            Gradients (one vector per particle).
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
+        """
         return np.asarray(G) * L_DIAG
 
     def casimirs(self, W: Array) -> Array:
-        r""":math:`w_i \cdot_L w_i` for each particle, shape ``(*batch, N)``."""
+        r""":math:`w_i \cdot_L w_i` for each particle, shape ``(*batch, N)``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            Elements, one vector per particle.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N)
+        """
         return dot_L(W, W)
 
     def to_matrix(self, W: Array) -> Array:
         """:func:`phi` per particle, shape ``(*batch, N, 2, 2)`` (a homomorphism for
-        :meth:`bracket`, which is the matrix bracket of the images)."""
+        :meth:`bracket`, which is the matrix bracket of the images).
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            Elements (or values of ``B``).
+        """
         return phi(W)
 
     def from_matrix(self, M: Array) -> Array:
-        """:func:`phi_inv` per particle (coordinates of the traceless part)."""
+        """:func:`phi_inv` per particle (coordinates of the traceless part).
+
+        Parameters
+        ----------
+        M : ndarray, shape (*batch, N, 2, 2)
+            Real matrices, one per particle.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
+        """
         return phi_inv(M)
 
     def phi(self, W: ArrayLike) -> Array:
-        """:func:`phi` applied to every particle: shape ``(*batch, N, 2, 2)``."""
+        """:func:`phi` applied to every particle: shape ``(*batch, N, 2, 2)``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            Elements.
+        """
         return phi(W)
 
     def __repr__(self) -> str:

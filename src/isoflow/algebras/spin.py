@@ -135,24 +135,66 @@ class SpinVectors(ParticleVectors):
         return cross(B, X), -dot(B, X)[..., None] * B
 
     def dagger(self, G: Array) -> Array:
-        r"""Vector form of the matrix transpose: :math:`\hat g^T = -\hat g`, so ``-G``."""
+        r"""Vector form of the matrix transpose: :math:`\hat g^T = -\hat g`, so ``-G``.
+
+        Parameters
+        ----------
+        G : ndarray, shape (*batch, N, 3)
+            Gradients (one vector per particle).
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
+        """
         return -np.asarray(G)
 
     def casimirs(self, W: Array) -> Array:
-        r""":math:`|w_i|^2` for each particle, shape ``(*batch, N)``."""
+        r""":math:`|w_i|^2` for each particle, shape ``(*batch, N)``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            Spins.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N)
+        """
         return dot(W, W)
 
     def to_matrix(self, W: Array) -> Array:
         """:func:`hat` per particle, shape ``(*batch, N, 3, 3)`` (a homomorphism for
-        :meth:`bracket`)."""
+        :meth:`bracket`).
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            Spins (or values of ``B``).
+        """
         return hat(W)
 
     def from_matrix(self, M: Array) -> Array:
-        """:func:`vee` per particle (the vector of the skew part)."""
+        """:func:`vee` per particle (the vector of the skew part).
+
+        Parameters
+        ----------
+        M : ndarray, shape (*batch, N, 3, 3)
+            Matrices, one per particle.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
+        """
         return vee(M)
 
     def hat(self, W: ArrayLike) -> Array:
-        """:func:`hat` applied to every particle: shape ``(*batch, N, 3, 3)``."""
+        """:func:`hat` applied to every particle: shape ``(*batch, N, 3, 3)``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            Spins.
+        """
         return hat(W)
 
     def __repr__(self) -> str:

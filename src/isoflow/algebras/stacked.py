@@ -59,6 +59,17 @@ class Stacked(Algebra):
         return self.copies * self.base.dim
 
     def project(self, W: Array) -> Array:
+        """The base's projection on every copy.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, copies, *base.shape)
+            Elements of the ambient space of the copies.
+
+        Returns
+        -------
+        ndarray, shape (*batch, copies, *base.shape)
+        """
         return self.base.project(W)
 
     def bracket(self, A: Array, X: Array) -> Array:
@@ -68,14 +79,38 @@ class Stacked(Algebra):
         return self.base.bracket_and_triple(B, X)
 
     def casimirs(self, W: Array) -> Array:
-        """The Casimirs of the copies, one after the other, shape ``(*batch, copies * m)``."""
+        """The Casimirs of the copies, one after the other, shape ``(*batch, copies * m)``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, copies, *base.shape)
+            Elements.
+
+        Returns
+        -------
+        ndarray, shape (*batch, copies * m)
+        """
         C = self.base.casimirs(W)
         return C.reshape(*C.shape[:-2], -1)
 
     def to_matrix(self, W: Array) -> Array:
+        """The base's matrix representation of every copy.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, copies, *base.shape)
+            Elements (or values of ``B``).
+        """
         return self.base.to_matrix(W)
 
     def from_matrix(self, M: Array) -> Array:
+        """The base's inverse of :meth:`to_matrix` on every copy (not projected).
+
+        Parameters
+        ----------
+        M : ndarray, shape (*batch, copies, ...)
+            Matrices of the shape :meth:`to_matrix` returns.
+        """
         return self.base.from_matrix(M)
 
     def to_coords(self, W: Array) -> Array:
@@ -83,6 +118,17 @@ class Stacked(Algebra):
         return c.reshape(*c.shape[:-2], self.dim)
 
     def from_coords(self, coords: ArrayLike) -> Array:
+        """The element with the given coordinates: those of the copies, one after the other.
+
+        Parameters
+        ----------
+        coords : ndarray, shape (*batch, dim)
+            Coordinates, ``dim = copies * base.dim``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, copies, *base.shape)
+        """
         c = self._coords_array(coords)
         return self.base.from_coords(c.reshape(*c.shape[:-1], self.copies, self.base.dim))
 

@@ -31,9 +31,32 @@ class Symmetric(MatrixAlgebra):
     transpose_sign = 1
 
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
+        """The transpose, :math:`Y^T`.
+
+        Parameters
+        ----------
+        Y : ndarray, shape (*batch, n, n)
+            Real matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
         return np.swapaxes(Y, -1, -2)
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
+        """The eigenvalues of ``W`` in ascending order.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, n, n)
+            Real symmetric matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n)
+            Real.
+        """
         return eigvalsh(W)
 
 

@@ -23,6 +23,18 @@ class Symplectic(MatrixAlgebra):
     central), real dimension :math:`2m^2 + m`. Casimirs: ``Tr(W^k)``, ``k = 1..2m`` (odd ones
     vanish); the matrices are not normal, so traces of powers are used instead of eigenvalues.
     ``sp(2) = sl(2, R)``.
+
+    Parameters
+    ----------
+    size : int
+        Matrix size ``2m`` (even, at least 2).
+    name : str, optional
+        Name of the space (default ``"sp(size)"``; :func:`sl2` gives ``"sl(2,R)"``).
+
+    Raises
+    ------
+    ParameterError
+        ``size`` is not an even integer ``>= 2``.
     """
 
     casimirs_are_eigenvalues = False
@@ -43,6 +55,17 @@ class Symplectic(MatrixAlgebra):
         return self
 
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
+        """The involution :math:`J Y^T J`.
+
+        Parameters
+        ----------
+        Y : ndarray, shape (*batch, n, n)
+            Real matrices, ``n = 2m``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
         # J Y^T J = [[-Y22^T, Y12^T], [Y21^T, -Y11^T]] for Y = [[Y11, Y12], [Y21, Y22]]
         m = self.m
         Yt = np.swapaxes(Y, -1, -2)
@@ -54,6 +77,18 @@ class Symplectic(MatrixAlgebra):
         return out
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
+        """``Tr(W^k)``, ``k = 1..2m`` (the odd ones vanish), real.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, n, n)
+            Elements of ``sp(2m)``, ``n = 2m``.
+
+        Returns
+        -------
+        ndarray, shape (*batch, 2m)
+            Real.
+        """
         return np.real(self.trace_powers(W))
 
 

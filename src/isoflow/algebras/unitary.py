@@ -30,9 +30,32 @@ class Unitary(MatrixAlgebra):
     transpose_sign = -1
 
     def sigma(self, Y: NDArray[Any]) -> NDArray[Any]:
+        r"""Minus the conjugate transpose, :math:`-Y^\dagger`.
+
+        Parameters
+        ----------
+        Y : ndarray, shape (*batch, n, n)
+            Complex matrices.
+
+        Returns
+        -------
+        ndarray, shape (*batch, n, n)
+        """
         return -np.conj(np.swapaxes(Y, -1, -2))
 
     def casimirs(self, W: NDArray[Any]) -> NDArray[Any]:
+        """The eigenvalues of the Hermitian matrix :math:`iW`, in ascending order.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, n, n)
+            Skew-Hermitian matrices (traceless for ``su(n)``).
+
+        Returns
+        -------
+        ndarray, shape (*batch, n)
+            Real.
+        """
         return eigvalsh(1j * W)
 
 

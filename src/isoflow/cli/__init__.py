@@ -62,6 +62,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``isoflow`` command; returns the exit status."""
+    """Entry point of the ``isoflow`` command; returns the exit status.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments after the program name (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The exit status (0 on success).
+    """
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     return run_command(args)

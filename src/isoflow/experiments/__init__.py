@@ -104,6 +104,29 @@ def run_experiment(
 
     Files of an earlier run in ``out`` are replaced (regular files only). Returns the written
     paths. The JSON holds the experiment's summary plus ``"passed"`` (all its checks hold).
+
+    Parameters
+    ----------
+    name : str
+        A registered experiment (``isoflow list experiments``).
+    out : str or os.PathLike
+        The output directory (created if missing).
+    quick : bool
+        Run the reduced version (default ``False``: the paper's parameters).
+    pdf : bool
+        Also write ``<name>.pdf`` (default ``True``).
+    progress : bool or None
+        Show progress bars (``None``, the default: only when the output is a terminal).
+
+    Returns
+    -------
+    list of Path
+        The figure files, then the JSON file.
+
+    Raises
+    ------
+    FileExistsError
+        ``<name>.json`` exists and is not a regular file.
     """
     experiment = registry.get_experiment(name)
     out = Path(out)

@@ -99,7 +99,20 @@ def check(value: float, bound: float, claim: str, *, below: bool = True) -> dict
 
 
 def fit_order(hs: Array, errors: Array) -> float:
-    """Least-squares slope of ``log(error)`` against ``log(h)`` over the finite, positive points."""
+    """Least-squares slope of ``log(error)`` against ``log(h)`` over the finite, positive points.
+
+    Parameters
+    ----------
+    hs : array_like
+        Step sizes (positive).
+    errors : array_like
+        The errors at those step sizes; NaN, Inf, zero or negative errors are left out.
+
+    Returns
+    -------
+    float
+        The slope (the observed order), NaN with fewer than two points left.
+    """
     hs, errors = np.asarray(hs, float), np.asarray(errors, float)
     ok = np.isfinite(errors) & (errors > 0)
     if np.count_nonzero(ok) < 2:

@@ -201,7 +201,22 @@ def unpack_state(blob: bytes, description: bytes) -> Any:
 
 
 def encode_failures(failures: MemberFailures | None, members: int) -> tuple[Array, bytes]:
-    """``(record, messages)``: a ``(members, 4)`` float array and the JSON of the messages."""
+    """``(record, messages)``: a ``(members, 4)`` float array and the JSON of the messages.
+
+    Parameters
+    ----------
+    failures : MemberFailures or None
+        The record (``None``: every member alive, step ``-1``).
+    members : int
+        Number of members.
+
+    Returns
+    -------
+    record : ndarray, shape (members, 4)
+        Step, status, iterations and residual per member.
+    messages : bytes
+        The failure messages as JSON (empty for ``None``).
+    """
     if failures is None:
         rec = np.zeros((members, 4))
         rec[:, 0] = -1.0
@@ -213,7 +228,23 @@ def encode_failures(failures: MemberFailures | None, members: int) -> tuple[Arra
 
 
 def decode_failures(rec: Array, messages: bytes, members: int) -> MemberFailures | None:
-    """The :class:`MemberFailures` of :func:`encode_failures` (``None`` if all are alive)."""
+    """The :class:`MemberFailures` of :func:`encode_failures` (``None`` if all are alive).
+
+    Parameters
+    ----------
+    rec : ndarray, shape (members, 4)
+        The stored record.
+    messages : bytes
+        The stored messages (JSON; empty for none).
+    members : int
+        Number of members the file records.
+
+    Raises
+    ------
+    ResultFileError
+        A record of the wrong shape or with values out of range, or messages that are not
+        about a member.
+    """
     what = "checkpoint failure record"
     rec = np.asarray(rec)
     if rec.dtype.kind != "f" or rec.shape != (members, 4):

@@ -60,12 +60,38 @@ SLOT_BYTES = ("state_blob", "state_desc", "failures_msg", "run_info")
 
 
 def header_crc(config_text: str, meta_text: str) -> int:
-    """CRC-32 of the ``config`` and ``meta`` attributes."""
+    """CRC-32 of the ``config`` and ``meta`` attributes.
+
+    Parameters
+    ----------
+    config_text, meta_text : str
+        The two attributes as stored (JSON text).
+
+    Returns
+    -------
+    int
+    """
     return crc32(config_text.encode(), b"\0", meta_text.encode())
 
 
 def slot_crc(index: Array, y: Array, failures: Array, parts: dict[str, bytes]) -> int:
-    """CRC-32 of a checkpoint slot: ``index[:3]``, ``y``, the failure record and its bytes."""
+    """CRC-32 of a checkpoint slot: ``index[:3]``, ``y``, the failure record and its bytes.
+
+    Parameters
+    ----------
+    index : ndarray of int
+        The slot's index ``(step, n_rows, n_blocks, crc)``; the first three are covered.
+    y : ndarray
+        The slot's state, in its stored dtype.
+    failures : ndarray, shape (members, 4)
+        The failure record (:func:`~isoflow.io.codec.encode_failures`).
+    parts : dict of str to bytes
+        The slot's byte datasets by name (:data:`SLOT_BYTES`, all of them).
+
+    Returns
+    -------
+    int
+    """
     crc = crc32(np.ascontiguousarray(index[:3], dtype="<i8").tobytes())
     crc = crc32(np.ascontiguousarray(y).tobytes(), crc.to_bytes(4, "little"))
     crc = crc32(np.ascontiguousarray(failures, dtype="<f8").tobytes(), crc.to_bytes(4, "little"))
@@ -75,7 +101,17 @@ def slot_crc(index: Array, y: Array, failures: Array, parts: dict[str, bytes]) -
 
 
 def write_attrs(f: h5py.File, config: dict[str, Any], meta: dict[str, Any]) -> None:
-    """The file's attributes (before SWMR mode: attributes cannot be added afterwards)."""
+    """The file's attributes (before SWMR mode: attributes cannot be added afterwards).
+
+    Parameters
+    ----------
+    f : h5py.File
+        The new file.
+    config : dict
+        The run configuration (JSON-ready), stored as ``config``.
+    meta : dict
+        The run's metadata (JSON-ready), stored as ``meta``; both covered by ``header_crc``.
+    """
     config_text, meta_text = json.dumps(config), json.dumps(meta)
     f.attrs["isoflow_format"] = FORMAT
     f.attrs["isoflow_format_version"] = FORMAT_VERSION
@@ -158,6 +194,13 @@ class _Slot:
 class Handles:
     """The datasets of an open file, looked up once (not on every write).
 
+    Parameters
+    ----------
+    f : h5py.File
+        A file with the layout of :func:`create_layout`.
+    n_rows, n_blocks : int
+        Rows and checksum blocks already valid (default 0: a new file).
+
     Attributes
     ----------
     n_rows, n_blocks : int
@@ -192,7 +235,17 @@ class Handles:
         self.checksums.resize(self.n_blocks, axis=0)
 
     def write_block(self, ts: Array, ys: Array, series: dict[str, Array]) -> None:
-        """Append one block of rows and its checksum row."""
+        """Append one block of rows and its checksum row.
+
+        Parameters
+        ----------
+        ts : ndarray, shape (m,)
+            Times of the rows.
+        ys : ndarray, shape (m, *batch, *shape)
+            The states.
+        series : dict of str to ndarray
+            Every diagnostic series of the file, ``(m, ...)`` each.
+        """
         n0, m = self.n_rows, len(ts)
         crcs = [n0 + m]
         for ds, data in (
@@ -218,7 +271,23 @@ class Handles:
         failures: MemberFailures | None,
         run_info: dict[str, Any] | None,
     ) -> None:
-        """Write a complete checkpoint into ``slot`` (not yet pointed to)."""
+        """Write a complete checkpoint into ``slot`` (not yet pointed to).
+
+        Parameters
+        ----------
+        slot : int
+            The slot, 0 or 1.
+        step : int
+            Steps done.
+        y : ndarray, shape (*batch, *shape)
+            The state after ``step`` steps.
+        method_state : object
+            The method's state (:func:`~isoflow.io.codec.pack_state`).
+        failures : MemberFailures or None
+            The failure record.
+        run_info : dict or None
+            The run's final status (``None`` while it runs).
+        """
         g = self.slots[slot]
         blob, desc = pack_state(method_state)
         rec, msgs = encode_failures(failures, g.failures.shape[0])

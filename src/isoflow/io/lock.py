@@ -39,6 +39,14 @@ def _holder(lock: Path) -> str:
 class WriteLock:
     """An exclusive lock on writing the result file ``path`` (held until :meth:`release`).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The result file (the lock is a file next to it).
+    wait : float
+        Seconds to keep trying while the lock is held (default 0.5: a reader's brief shared
+        lock, or a race).
+
     Raises
     ------
     ResultFileError

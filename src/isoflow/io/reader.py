@@ -95,7 +95,27 @@ class Checkpoint:
 
 @dataclass
 class Opened:
-    """An open, validated result file (inside :func:`open_result`)."""
+    """An open, validated result file (inside :func:`open_result`).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    f : h5py.File
+        The open file.
+    version : int
+        The format version (1 or 2).
+    config, meta : dict
+        The recorded configuration and metadata.
+    live : str or None
+        ``"pid N on HOST"`` of a writer holding the file's lock, else ``None``.
+    flagged : bool
+        The file was not closed by its writer, and no writer is alive (a killed run).
+    rows : dict of str to h5py.Dataset
+        The row datasets: ``ts``, ``ys``, then the diagnostic series.
+    checksums : h5py.Dataset or None
+        The checksum rows (``None`` in version 1 files).
+    """
 
     path: Path
     f: h5py.File
@@ -108,7 +128,18 @@ class Opened:
     checksums: h5py.Dataset | None
 
     def fail(self, what: str) -> ResultFileError:
-        """A :class:`ResultFileError` about this file."""
+        """A :class:`ResultFileError` about this file.
+
+        Parameters
+        ----------
+        what : str
+            What is wrong (the message after the path).
+
+        Returns
+        -------
+        ResultFileError
+            To be raised by the caller.
+        """
         return ResultFileError(f"{self.path}: {what}")
 
 
@@ -317,7 +348,22 @@ def _int_vector(ds: h5py.Dataset, n: int, what: str, o: Opened) -> list[int]:
 
 
 def read_checkpoint(o: Opened) -> Checkpoint | None:
-    """The last complete checkpoint, every field validated (``None`` if there is none)."""
+    """The last complete checkpoint, every field validated (``None`` if there is none).
+
+    Parameters
+    ----------
+    o : Opened
+        The open file.
+
+    Returns
+    -------
+    Checkpoint or None
+
+    Raises
+    ------
+    ResultFileError
+        A damaged or inconsistent checkpoint.
+    """
     f, meta = o.f, o.meta
     if "checkpoint" not in f:
         return None
@@ -393,6 +439,17 @@ def iter_rows(
     Yields ``(blocks, data)``: the checksum blocks ``(start, stop)`` of the span (one per span
     in version 1 files) and ``name -> rows``. With ``verify`` (version 2), every block of every
     dataset read is checked against its CRC-32.
+
+    Parameters
+    ----------
+    o : Opened
+        The open file.
+    cp : Checkpoint
+        Its checkpoint (how many rows and blocks are valid).
+    names : list of str
+        The datasets to read (keys of ``o.rows``).
+    verify : bool
+        Check the CRC-32 of every block (default ``True``; version 2 files only).
 
     Raises
     ------
@@ -585,6 +642,17 @@ def load(path: str | os.PathLike[str]) -> RunData:
     """Read a result file (also one whose run was killed: its valid states) into memory.
 
     Every row read is checked against its checksum (format version 2).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The result file (as written by :class:`~isoflow.io.HDF5Writer`).
+
+    Returns
+    -------
+    RunData
+        Times, states, diagnostic series, the recorded configuration and metadata, the final
+        status and the Casimir drifts.
 
     Raises
     ------

@@ -134,6 +134,15 @@ def _same_value(a: Any, b: Any) -> bool:
 def check_recorded_state(meta: Mapping[str, Any], problem: IsospectralProblem, y0: Any) -> None:
     """Check that a rebuilt model has the space and state shape a result file recorded.
 
+    Parameters
+    ----------
+    meta : mapping
+        The file's metadata (``algebra``, ``state_shape``; a missing key is not checked).
+    problem : IsospectralProblem
+        The rebuilt problem.
+    y0 : array_like
+        The rebuilt initial state.
+
     Raises
     ------
     ConfigError

@@ -28,6 +28,18 @@ def recover(path: Path, chunk_rows: int = 256) -> Checkpoint:
 
     The caller holds the file's write lock.
 
+    Parameters
+    ----------
+    path : Path
+        The result file.
+    chunk_rows : int
+        Rows copied per block of the new file (default 256).
+
+    Returns
+    -------
+    Checkpoint
+        The checkpoint of the rewritten file.
+
     Raises
     ------
     ResultFileError

@@ -38,7 +38,20 @@ def _rot(x: int, k: int) -> int:
 
 
 def lookup3(data: bytes, initval: int = 0) -> int:
-    """Bob Jenkins' lookup3 ``hashlittle`` of ``data``, the checksum of HDF5's metadata."""
+    """Bob Jenkins' lookup3 ``hashlittle`` of ``data``, the checksum of HDF5's metadata.
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes to hash.
+    initval : int
+        The initial value (default 0, as HDF5 uses).
+
+    Returns
+    -------
+    int
+        The 32-bit hash.
+    """
     length = len(data)
     a = b = c = (0xDEADBEEF + length + initval) & _M32
     i = 0
@@ -113,6 +126,14 @@ class _Overlaid(io.RawIOBase):
         return self._pos
 
     def readinto(self, buffer: Any) -> int:
+        """Read from the current position into ``buffer`` (the overlay applied, zeros past
+        the end of the file on disk); return the bytes read.
+
+        Parameters
+        ----------
+        buffer : writable buffer
+            Filled with up to ``len(buffer)`` bytes.
+        """
         view = memoryview(buffer).cast("B")
         n = len(view)
         start = self._pos
@@ -163,6 +184,19 @@ class SafeFile(_Overlaid):
         return True
 
     def write(self, data: Any) -> int:
+        """Write ``data`` at the current position; a failed write is recorded in
+        :attr:`error` and kept in memory, and later writes go to memory only.
+
+        Parameters
+        ----------
+        data : bytes-like
+            The bytes to write.
+
+        Returns
+        -------
+        int
+            ``len(data)`` (always: HDF5 sees every write succeed).
+        """
         raw = bytes(memoryview(data).cast("B"))
         start = self._pos
         self._pos += len(raw)
@@ -208,6 +242,13 @@ class ReadView(_Overlaid):
     was_flagged : bool
         The file's superblock flags differed from ``flags`` (for ``flags=0``: the file's
         writer did not close it).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    flags : int
+        The superblock's file-consistency flags to show (default 0: closed).
     """
 
     def __init__(self, path: str | os.PathLike[str], *, flags: int = 0) -> None:
@@ -231,4 +272,16 @@ class ReadView(_Overlaid):
         return False
 
     def write(self, data: Any) -> int:
+        """Refuse: the view is read-only.
+
+        Parameters
+        ----------
+        data : bytes-like
+            Ignored.
+
+        Raises
+        ------
+        OSError
+            Always (``EBADF``).
+        """
         raise OSError(errno.EBADF, "read-only view")

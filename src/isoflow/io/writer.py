@@ -191,7 +191,20 @@ class HDF5Writer:
     # the protocol ---------------------------------------------------------------------------
 
     def open(self, meta: dict[str, Any]) -> None:
-        """Lock the path and create the file (as ``<path>.partial``) with its attributes."""
+        """Lock the path and create the file (as ``<path>.partial``) with its attributes.
+
+        Parameters
+        ----------
+        meta : dict
+            What describes the run (times, method, algebra, ...; JSON-ready), stored as the
+            file's ``meta`` attribute together with the writer's settings.
+
+        Raises
+        ------
+        ResultFileError
+            Another process writes the file (the lock), or the path is no longer a valid
+            target (it exists and ``force`` is false, it is a directory, a dangling symlink).
+        """
         flush = self.flush_seconds if math.isfinite(self.flush_seconds) else None
         # what a resume writes with unless told otherwise (:func:`isoflow.io.resume`)
         self._meta = {**meta, "writer": {"chunk_rows": self.chunk_rows, "flush_seconds": flush}}
@@ -241,7 +254,26 @@ class HDF5Writer:
         )
 
     def append(self, ts: Array, ys: Array, series: dict[str, Array]) -> None:
-        """Write saved states ``ys`` at ``ts`` and their diagnostics (durable at checkpoint)."""
+        """Write saved states ``ys`` at ``ts`` and their diagnostics (durable at checkpoint).
+
+        The first call creates the row datasets from the shapes and dtypes of its arguments.
+
+        Parameters
+        ----------
+        ts : ndarray, shape (n,)
+            Times of the saved states.
+        ys : ndarray, shape (n, *batch, *shape)
+            The saved states, time first.
+        series : dict of str to ndarray
+            The diagnostics of the same rows, name to array ``(n, ...)``.
+
+        Raises
+        ------
+        ValueError
+            Called before :meth:`open`.
+        ResultWriteError
+            A write failed.
+        """
         if self._f is None:
             raise ValueError("HDF5Writer.append before open")
         if self._h is None:
@@ -280,7 +312,29 @@ class HDF5Writer:
     def checkpoint(
         self, step: int, y: Array, method_state: Any, failures: MemberFailures | None = None
     ) -> None:
-        """Flush the rows, then write a complete checkpoint into the spare slot and point to it."""
+        """Flush the rows, then write a complete checkpoint into the spare slot and point to it.
+
+        The first checkpoint moves the file from ``<path>.partial`` to ``path``.
+
+        Parameters
+        ----------
+        step : int
+            Number of steps taken to reach ``y``.
+        y : ndarray, shape (*batch, *shape)
+            The state after ``step`` steps.
+        method_state : object
+            The method's state (``None`` or a flat tuple of numbers and arrays) for a resume
+            bit for bit.
+        failures : MemberFailures, optional
+            Which ensemble members failed, when and why (``None``: none recorded).
+
+        Raises
+        ------
+        ValueError
+            Called before the first :meth:`append`.
+        ResultWriteError
+            A write failed.
+        """
         if self._f is None or self._h is None:
             raise ValueError("HDF5Writer.checkpoint before the first rows")
         self._commit(step, y, method_state, failures, None)
@@ -296,6 +350,15 @@ class HDF5Writer:
 
     def close(self, info: dict[str, Any]) -> None:
         """Publish the run's final status with its last checkpoint, close and unlock the file.
+
+        A file that never received a checkpoint is removed. Nothing happens when the writer
+        is not open.
+
+        Parameters
+        ----------
+        info : dict
+            The run's final status: status, message and :class:`~isoflow.SolveStats`
+            (JSON-ready), written with the last checkpoint.
 
         Raises
         ------
@@ -346,6 +409,30 @@ class HDF5Writer:
 
         ``lock`` is held by the caller and released by :meth:`close`; ``last`` is the
         checkpoint ``slot`` holds.
+
+        Parameters
+        ----------
+        path : Path
+            The result file (published, not ``.partial``).
+        lock : WriteLock
+            The file's write lock, already held.
+        n_rows : int
+            Number of valid rows; the row datasets are cut to it.
+        n_blocks : int
+            Number of valid checksum rows (blocks); the checksums are cut to it.
+        slot : int
+            The checkpoint slot (0 or 1) the file points to.
+        last : (int, ndarray, object, MemberFailures or None)
+            The checkpoint in ``slot``: step, state, method state, failures.
+        chunk_rows : int
+            Rows between checkpoints from now on.
+        flush_seconds : float
+            Seconds between checkpoints from now on.
+
+        Returns
+        -------
+        HDF5Writer
+            Open for :meth:`append` and :meth:`checkpoint`.
         """
         w = cls.__new__(cls)
         w.path = w._target = Path(path)

@@ -44,7 +44,18 @@ class StepResult:
 
     @classmethod
     def from_solve(cls, y: Array, res: NonlinearResult, state: Any = None) -> StepResult:
-        """The step to ``y`` whose implicit stage and solve record are those of ``res``."""
+        """The step to ``y`` whose implicit stage and solve record are those of ``res``.
+
+        Parameters
+        ----------
+        y : ndarray, shape (*batch, *shape)
+            The new state.
+        res : NonlinearResult
+            The solve of the step's stage: its solution ``x`` becomes :attr:`stage`, its
+            ``iterations``, ``residual`` and ``status`` the solve record.
+        state : object, optional
+            The method state for the next step (default ``None``).
+        """
         return cls(
             y=y,
             stage=res.x,
@@ -130,16 +141,68 @@ class Method:
     integrates_noise: ClassVar[bool] = False
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
-        """The step data ``(nsteps, members, D)`` of ``request`` (methods that read some)."""
+        """The step data ``(nsteps, members, D)`` of ``request`` (methods that read some).
+
+        A function of the method, the problem, the step numbers and the members only, so that
+        a resumed or split run reads the same data.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        request : StepDataRequest
+            The steps, the members and the step size the data are for.
+
+        Returns
+        -------
+        ndarray, shape (nsteps, members, D)
+            Row ``s`` is the data of step ``request.k0 + s + 1``.
+        """
         raise NotImplementedError  # pragma: no cover
 
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
-        """Initial method state (default: none)."""
+        """Initial method state (default: none).
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y0 : ndarray, shape (*batch, *shape)
+            The initial state, in the problem's space.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        object
+            ``None`` or a flat tuple of floats, integers and arrays (class docstring), handed
+            to the first :meth:`step`.
+        """
         return None
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:  # pragma: no cover - abstract
+        """One step of size ``h`` from ``y``.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            The method state returned by :meth:`init` or by the previous step (``None``: no
+            history, e.g. a step taken on its own).
+
+        Returns
+        -------
+        StepResult
+            The new state, the implicit stage and solve record (implicit methods) and the
+            method state for the next step.
+        """
         raise NotImplementedError
 
 

@@ -40,6 +40,25 @@ class ClassicalMidpoint(Method):
     name: ClassVar[str] = "classical midpoint"
 
     def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:
+        r"""The fixed-point problem :math:`M = W + \tfrac h2 [B(M), M]` of one step from ``W``.
+
+        ``G`` also returns the bracket :math:`[B(M), M]` (projected), which makes the update
+        :math:`W + h [B(M), M]`.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        W : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        FixedPointProblem
+            With Newton's Jacobian-vector product when the problem has ``B_jvp``.
+        """
         alg = problem.algebra
         half = 0.5 * h
 
@@ -61,6 +80,24 @@ class ClassicalMidpoint(Method):
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
+        """One step: the midpoint solved from ``y``, then ``y + h [B(M), M]`` projected.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            Ignored (the method keeps no state; the solve starts from ``y``).
+
+        Returns
+        -------
+        StepResult
+            The new state, the midpoint and the solve record.
+        """
         res = self.solver.solve(self.stage_problem(problem, y, h), y)
         y_next = problem.algebra.project(y + h * res.aux)
         return StepResult.from_solve(y_next, res)

@@ -396,11 +396,48 @@ class Composition(Method):
 
     # ---- stepping -----------------------------------------------------------------------------
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
+        """The base's initial state for each substep ``gamma_i h``, packed in one tuple.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y0 : ndarray, shape (*batch, *shape)
+            The initial state, in the problem's space.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        object
+            The base's states of the substeps (``None`` when the base keeps none).
+        """
         return _pack([self.base.init(problem, y0, g * h) for g in self.coefficients])
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
+        """The substeps ``gamma_1 h, ..., gamma_m h`` of the base, one after the other.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            The packed states of the substeps from :meth:`init` or the previous step (``None``: each
+            substep starts without history).
+
+        Returns
+        -------
+        StepResult
+            The new state; for an implicit base the iterations summed over the substeps, the
+            largest residual, and a failed member's first failure code (it keeps the output
+            of the substep that failed).
+        """
         alg = problem.algebra
         m = len(self.coefficients)
         states = _unpack(state, m)

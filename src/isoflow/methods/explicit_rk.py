@@ -31,6 +31,24 @@ class RK4(Method):
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
+        """One classical Runge–Kutta step on the vector field ``[B(W), W]``, projected.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            Ignored (no state).
+
+        Returns
+        -------
+        StepResult
+            The new state.
+        """
         f = problem.vector_field
         k1 = f(y)
         k2 = f(y + 0.5 * h * k1)

@@ -224,6 +224,22 @@ class IsoMP(Method):
         ``mask`` selects the members still iterating, ``None`` all); Newton's exact Jacobian
         is then used only if ``extra`` does not depend on ``X``, as the caller says by giving
         the problem's ``B_jvp`` or not.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        W : ndarray, shape (*batch, *shape)
+            The state ``W_k`` at the start of the step.
+        h : float
+            The step size.
+        extra : callable, optional
+            ``extra(X, mask) -> array`` of ``B``'s shape, added to ``B(X)`` (default: none).
+
+        Returns
+        -------
+        FixedPointProblem
+            On the stage space; its auxiliary output is the bracket ``[B(X), X]``.
         """
         alg = problem.algebra
         stage_alg = alg.stage_algebra
@@ -264,6 +280,28 @@ class IsoMP(Method):
         return FixedPointProblem(G=G, algebra=stage_alg, scale=scale, jvp=jvp)
 
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
+        """No state before the first step: no stage offsets, no compensation; the space is
+        checked for the update.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y0 : ndarray, shape (*batch, *shape)
+            The initial state, in the problem's space.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        object
+            ``None``.
+
+        Raises
+        ------
+        ParameterError
+            ``update="cayley"`` on a space without it (:meth:`check_space`).
+        """
         self.check_space(problem.algebra)
         return None
 
@@ -274,14 +312,42 @@ class IsoMP(Method):
 
     def history(self, h: float, state: Any, order: int) -> tuple[Array, ...]:
         """The stored stage offsets ``(D_{k-1}, D_{k-2}, ...)`` usable with step ``h``, at
-        most ``order + 1``."""
+        most ``order + 1``.
+
+        Parameters
+        ----------
+        h : float
+            The step size of the coming step; offsets stored with another step size are not
+            used.
+        state : object
+            The method state (:func:`pack_state`), or ``None``.
+        order : int
+            The extrapolation order (:meth:`order_for`).
+
+        Returns
+        -------
+        tuple of ndarray
+            Empty when ``initial_guess`` is ``"state"``.
+        """
         if self.initial_guess != "extrapolate":
             return ()
         offsets, _ = state_parts(state, h)
         return offsets[: order + 1]
 
     def initial_stage(self, y: Array, offsets: tuple[Array, ...]) -> Array:
-        """``X^(0) = W_k + sum_q a_q D_{k-q}`` with the extrapolation weights ``a_q``."""
+        """``X^(0) = W_k + sum_q a_q D_{k-q}`` with the extrapolation weights ``a_q``.
+
+        Parameters
+        ----------
+        y : ndarray, shape (*batch, *shape)
+            The state ``W_k``.
+        offsets : tuple of ndarray
+            The stage offsets of :meth:`history` (empty: ``X^(0) = W_k``).
+
+        Returns
+        -------
+        ndarray, shape (*batch, *shape)
+        """
         if not offsets:
             return y
         a = extrapolation_weights(len(offsets))
@@ -293,6 +359,26 @@ class IsoMP(Method):
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
+        """One IsoMP step (module docstring) with its ``update``, compensated unless
+        ``compensated=False``.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            The state of the previous step: stage offsets for the extrapolated initial guess and the
+            compensation ``E`` (:func:`pack_state`); ``None`` before the first step.
+
+        Returns
+        -------
+        StepResult
+            The new state, the stage ``X``, the solve record and the state for the next step.
+        """
         alg = problem.algebra
         order = self.order_for(alg)
         offsets = self.history(h, state, order)

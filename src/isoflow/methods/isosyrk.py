@@ -218,6 +218,20 @@ class IsoSyRK(Method):
 
         ``G`` returns the new stages :math:`R_i W S_i` (projected) and, as auxiliary output,
         the brackets :math:`[B(\widetilde W_i), R_i W S_i]` that enter the update.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        W : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        FixedPointProblem
+            On ``stages`` copies of the stage space.
         """
         alg = problem.algebra
         s = int(self.stages)
@@ -257,6 +271,27 @@ class IsoSyRK(Method):
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
+        """One IsoSyRK step: the ``s`` stages solved, then the update with the weights ``b``.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            ``(h, D_1, ...)``: the stage offsets of the previous steps, used for the
+            extrapolated initial guess when stored with the same step size; without them the
+            guess is the explicit collocation guess (the state itself with
+            ``initial_guess="state"``).
+
+        Returns
+        -------
+        StepResult
+            The new state, the stages, the solve record and the state for the next step.
+        """
         alg = problem.algebra
         _, b, _ = self.tableau
         X0 = self._initial(problem, y, h, state)

@@ -141,7 +141,26 @@ class SphericalMidpoint(Method):
         return alg
 
     def stage_problem(self, problem: IsospectralProblem, W: Array, h: float) -> FixedPointProblem:
-        """The fixed-point problem ``M = G(M)`` of one step from ``W``."""
+        """The fixed-point problem ``M = G(M)`` of one step from ``W``.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance, on :func:`~isoflow.algebras.so3_vectors`.
+        W : ndarray, shape (*batch, N, 3)
+            The state at the start of the step.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        FixedPointProblem
+
+        Raises
+        ------
+        UnsupportedAlgebraError
+            The problem is not on ``(R^3, x)^N``.
+        """
         alg = self._check(problem)
         half = 0.5 * h
 
@@ -164,12 +183,56 @@ class SphericalMidpoint(Method):
         return FixedPointProblem(G=G, algebra=alg, scale=alg.norm(W), jvp=jvp)
 
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
+        """Check the space; no state before the first step.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance, on :func:`~isoflow.algebras.so3_vectors`.
+        y0 : ndarray, shape (*batch, N, 3)
+            The initial state.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        None
+
+        Raises
+        ------
+        UnsupportedAlgebraError
+            The problem is not on ``(R^3, x)^N``.
+        """
         self._check(problem)
         return None
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
+        """One spherical midpoint step.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance, on :func:`~isoflow.algebras.so3_vectors`.
+        y : ndarray, shape (*batch, N, 3)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            ``(h, M_k - W_k)`` of the previous step, the warm start when
+            ``initial_guess="extrapolate"`` and the step size is the same; ``None`` starts
+            from ``y``.
+
+        Returns
+        -------
+        StepResult
+
+        Raises
+        ------
+        UnsupportedAlgebraError
+            The problem is not on ``(R^3, x)^N``.
+        """
         alg = self._check(problem)
         M0 = y
         if self.initial_guess == "extrapolate" and state is not None and state[0] == h:

@@ -73,13 +73,47 @@ class StochasticHeun(Method):
         check_substeps(self.substeps)
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
-        """The increments ``(nsteps, members, D)`` (those of :class:`~isoflow.StochasticIsoMP`)."""
+        """The increments ``(nsteps, members, D)`` (those of :class:`~isoflow.StochasticIsoMP`).
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        request : StepDataRequest
+            The steps, the members and the step size the data are for.
+
+        Returns
+        -------
+        ndarray, shape (nsteps, members, D)
+        """
         return transport_increments(problem, request, self.truncation, self.substeps)
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None,
         data: Array | None = None,
     ) -> StepResult:  # fmt: skip
+        """One stochastic Heun step on ``[h B(X) + sum_i dbeta_i B_i(X), X]``, projected.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            Ignored (no state).
+        data : ndarray, shape (*batch, D), optional
+            The step's Brownian increments, as the time loop hands them (:meth:`step_data`);
+            ``None`` draws those of the first step of the members ``0 .. M - 1`` (a step on its
+            own).
+
+        Returns
+        -------
+        StepResult
+            The new state.
+        """
         alg = problem.algebra
         noise = problem.noise
         db = None if noise is None else step_increments(self, problem, y, h, data)

@@ -110,13 +110,47 @@ class StochasticIsoMP(Method):
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
         """The increments ``(nsteps, members, D)`` of the request (``D`` Brownian motions,
-        :meth:`TransportNoise.dimension <isoflow.noise.TransportNoise.dimension>`)."""
+        :meth:`TransportNoise.dimension <isoflow.noise.TransportNoise.dimension>`).
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        request : StepDataRequest
+            The steps, the members and the step size the data are for.
+
+        Returns
+        -------
+        ndarray, shape (nsteps, members, D)
+        """
         return transport_increments(problem, request, self.truncation, self.substeps)
 
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None,
         data: Array | None = None,
     ) -> StepResult:  # fmt: skip
+        """One IsoMP step on the field with noise, from the state (no warm start).
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size.
+        state : object, optional
+            Ignored (no state).
+        data : ndarray, shape (*batch, D), optional
+            The step's Brownian increments, as the time loop hands them (:meth:`step_data`);
+            ``None`` draws those of the first step of the members ``0 .. M - 1`` (a step on its
+            own).
+
+        Returns
+        -------
+        StepResult
+            The new state, the stage and the solve record.
+        """
         noise = problem.noise
         base = self.deterministic
         if noise is None or noise.dimension(problem.algebra) == 0:

@@ -117,6 +117,22 @@ class Strang(Method):
 
     # ---- stepping -----------------------------------------------------------------------------
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
+        """The base method's initial state.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y0 : ndarray, shape (*batch, *shape)
+            The initial state, in the problem's space.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        object
+            What ``base.init`` returns.
+        """
         return self.base.init(problem, y0, h)
 
     def half(self, problem: IsospectralProblem, tau: float) -> HalfStep:
@@ -145,7 +161,21 @@ class Strang(Method):
         amplitudes at its midpoint, then the standard normals of its noise modes (first half,
         second half; :func:`isoflow.splitting.data_widths`), then the ``D`` columns of the
         base's own step data when it reads some (the transport noise's increments of
-        :class:`~isoflow.StochasticIsoMP`, drawn as the base alone draws them)."""
+        :class:`~isoflow.StochasticIsoMP`, drawn as the base alone draws them).
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        request : StepDataRequest
+            The steps, the members and the step size the data are for. Step ``k`` starts at
+            ``request.t0 + (k - 1) h``; the amplitudes are taken at the midpoints of its two
+            half steps.
+
+        Returns
+        -------
+        ndarray, shape (nsteps, members, 2 (R_d + R_s) + D)
+        """
         det, sto = self._terms(problem)
         rd, rs = data_widths(problem, (det, sto))
         members = np.asarray(request.members, dtype=np.int64).reshape(-1)
@@ -203,6 +233,33 @@ class Strang(Method):
         state: Any = None,
         data: Array | None = None,
     ) -> StepResult:
+        """One Strang step: half a step of the linear part and forcing, the base's step, and
+        the second half.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y : ndarray, shape (*batch, *shape)
+            The state at the start of the step.
+        h : float
+            The step size (each half step has ``h / 2``).
+        state : object, optional
+            The base method's state, passed on to its step.
+        data : ndarray, shape (*batch, 2 (R_d + R_s) + D), optional
+            The step's data (:meth:`step_data`); required when the forcing has
+            time-dependent amplitudes or noise, or the base reads step data.
+
+        Returns
+        -------
+        StepResult
+            The new state with the base step's stage, solve record and state.
+
+        Raises
+        ------
+        ParameterError
+            Step data needed but not given (a split step inside a composition).
+        """
         rd, rs = data_widths(problem, self._terms(problem))
         half = rd + rs
         own: dict[str, Array] = {}

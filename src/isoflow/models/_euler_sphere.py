@@ -46,7 +46,20 @@ _BUILD_PEAK_STATES = 5.5
 
 def coriolis_matrix(N: int, omega: float) -> Array:
     r"""The quantized Coriolis term :math:`F = i\,T(2\Omega\cos\theta) = 2i\Omega\hbar J_3`
-    (diagonal, in ``su(N)``), :math:`J_3 = \operatorname{diag}(-s, \dots, s)`."""
+    (diagonal, in ``su(N)``), :math:`J_3 = \operatorname{diag}(-s, \dots, s)`.
+
+    Parameters
+    ----------
+    N : int
+        Matrix size.
+    omega : float
+        The rotation rate :math:`\Omega` of the sphere.
+
+    Returns
+    -------
+    ndarray, shape (N, N)
+        Complex, diagonal.
+    """
     N = check_N(N)
     m = np.arange(N) - 0.5 * (N - 1)
     return np.diag(2j * float(omega) * hbar(N) * m)

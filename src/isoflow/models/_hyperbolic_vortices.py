@@ -47,6 +47,21 @@ def paper_vortex_config(config: int) -> tuple[Array, Array]:
     * 2 (geodesic relative equilibrium): :math:`(\tfrac{13}{5}, \tfrac{5}{26},
       \tfrac{363}{130})`, :math:`(4, \tfrac18, \tfrac{33}{8})`, :math:`(3, \tfrac16,
       \tfrac{19}{6})`, :math:`\Gamma^2 = (0.0990, 0.8091, 1)`.
+
+    Parameters
+    ----------
+    config : {1, 2}
+        The configuration of the paper.
+
+    Returns
+    -------
+    positions : ndarray, shape (3, 3)
+    circulations : ndarray, shape (3,)
+
+    Raises
+    ------
+    ParameterError
+        ``config`` is not 1 or 2.
     """
     if config not in PAPER_CONFIGS:
         raise ParameterError(f"hyperbolic_vortices: config must be 1 or 2, got {config!r}")

@@ -130,7 +130,27 @@ def quantized_z2(N: int) -> Array:
 
 
 def qg_operator(N: int, lamb: float = 0.0, kappa: float = 0.0) -> QGOperator:
-    """The elliptic operator of :func:`qg_sphere` (checked: finite, ``lamb, kappa >= 0``)."""
+    r"""The elliptic operator of :func:`qg_sphere` (checked: finite, ``lamb, kappa >= 0``).
+
+    Parameters
+    ----------
+    N : int
+        Matrix size.
+    lamb : float
+        :math:`F \ge 0`, the coefficient of the :math:`F\cos^2\theta\,\psi` term (default 0).
+    kappa : float
+        :math:`\kappa \ge 0`, the inverse deformation radius (default 0).
+
+    Returns
+    -------
+    QGOperator
+
+    Raises
+    ------
+    ParameterError
+        A bad ``N``, a negative or non-finite ``lamb`` or ``kappa``, or an operator that is
+        not negative definite.
+    """
     N = check_N(N, "qg_sphere: N")
     lamb = _nonnegative(lamb, "lamb")
     kappa = _nonnegative(kappa, "kappa")

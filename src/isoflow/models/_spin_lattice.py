@@ -27,7 +27,25 @@ Array = NDArray[Any]
 
 @numba.njit(cache=True)
 def spin_lattice_field(W, out, L1, L2, J, Jz, field):  # type: ignore[no-untyped-def]
-    r"""``B_i = h - J sum_{j ~ i} D w_j`` on the periodic ``L1 x L2`` lattice, ``(N, 3)``."""
+    r"""``B_i = h - J sum_{j ~ i} D w_j`` on the periodic ``L1 x L2`` lattice, ``(N, 3)``.
+
+    A numba function for one system (the compiled ``f`` of :func:`spin_lattice`'s kernel).
+
+    Parameters
+    ----------
+    W : ndarray, shape (N, 3)
+        Spins, site ``(a, b)`` in row ``a L2 + b``; ``N = L1 L2``.
+    out : ndarray, shape (N, 3)
+        Written with ``B``.
+    L1, L2 : int
+        The lattice size.
+    J, Jz : float
+        The coupling of the ``x`` and ``y`` components and that of the ``z`` component
+        (``Jz = J (1 + anisotropy)``): ``B_i = h - (J s_x, J s_y, Jz s_z)`` with ``s`` the
+        sum of the four neighbours of site ``i``.
+    field : ndarray, shape (3,)
+        The Zeeman field ``h``.
+    """
     for a in range(L1):
         ap = a + 1 if a + 1 < L1 else 0
         am = a - 1 if a > 0 else L1 - 1
@@ -47,7 +65,15 @@ def spin_lattice_field(W, out, L1, L2, J, Jz, field):  # type: ignore[no-untyped
 @numba.njit(cache=True)
 def spin_lattice_llg_field(W, out, L1, L2, J, Jz, field, lam):  # type: ignore[no-untyped-def]
     r"""``B_i = H_i + lam S_i x H_i`` with :math:`H_i` of :func:`spin_lattice_field` (Gilbert
-    damping, :mod:`isoflow.models._llg`)."""
+    damping, :mod:`isoflow.models._llg`).
+
+    Parameters
+    ----------
+    W, out, L1, L2, J, Jz, field
+        As in :func:`spin_lattice_field`.
+    lam : float
+        The Gilbert damping :math:`\lambda`.
+    """
     spin_lattice_field(W, out, L1, L2, J, Jz, field)
     gilbert(W, out, lam)
 

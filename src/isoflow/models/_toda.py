@@ -86,6 +86,15 @@ def off_band(L: ArrayLike) -> Array:
 
     Zero along the exact Toda flow from a tridiagonal state; for IsoMP it measures how far the
     discrete state has left the Jacobi matrices (see :func:`toda`).
+
+    Parameters
+    ----------
+    L : array_like, shape (*batch, n, n)
+        Symmetric matrices (states of :func:`toda`).
+
+    Returns
+    -------
+    ndarray, shape (*batch,)
     """
     L_ = np.asarray(L)
     n = L_.shape[-1]

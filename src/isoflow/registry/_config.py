@@ -155,6 +155,18 @@ def normalize_config(config: Mapping[str, Any], *, model: ModelSpec | None = Non
 def config_from_toml(table: Mapping[str, Any]) -> tuple[dict[str, Any], str | None]:
     """Split a TOML run file into the run configuration and ``out`` (the result file).
 
+    Parameters
+    ----------
+    table : mapping
+        The parsed TOML file (its top-level table).
+
+    Returns
+    -------
+    config : dict
+        The run options (everything but ``out``), not yet normalized.
+    out : str or None
+        The result file, or ``None`` when the file names none.
+
     Raises
     ------
     ConfigError

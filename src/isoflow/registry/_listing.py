@@ -11,7 +11,22 @@ __all__ = ["describe"]
 
 
 def describe(kind: str) -> list[tuple[str, str, list[str]]]:
-    """``(name, description, parameter lines)`` of every model/method/solver/experiment."""
+    """``(name, description, parameter lines)`` of every model/method/solver/experiment.
+
+    Parameters
+    ----------
+    kind : {"models", "methods", "solvers", "experiments"}
+        What to list; models include those registered by installed packages (entry points).
+
+    Returns
+    -------
+    list of (str, str, list of str)
+
+    Raises
+    ------
+    ConfigError
+        An unknown ``kind``.
+    """
     if kind == "models":
         rows = []
         for spec in MODELS.values():

@@ -45,7 +45,19 @@ __all__ = [
 
 @dataclass(frozen=True)
 class SolverSpec:
-    """A nonlinear solver for implicit methods: ``make(rtol, anderson)``."""
+    """A nonlinear solver for implicit methods: ``make(rtol, anderson)``.
+
+    Parameters
+    ----------
+    name : str
+        The name on the command line and in configuration files.
+    make : callable
+        ``make(rtol, anderson) -> NonlinearSolver`` (``rtol=None``: the solver's default).
+    description : str
+        One line for ``isoflow list solvers``.
+    anderson : bool
+        Whether the solver takes Anderson mixing (default ``False``).
+    """
 
     name: str
     make: Callable[[float | None, int], NonlinearSolver]
@@ -83,7 +95,19 @@ SOLVERS: dict[str, SolverSpec] = {
 
 @dataclass(frozen=True)
 class MethodSpec:
-    """A time-stepping method: ``make(solver)``; ``implicit`` methods take a solver."""
+    """A time-stepping method: ``make(solver)``; ``implicit`` methods take a solver.
+
+    Parameters
+    ----------
+    name : str
+        The name on the command line and in configuration files.
+    make : callable
+        ``make(solver) -> Method`` (``solver`` is ``None`` for an explicit method).
+    description : str
+        One line for ``isoflow list methods``.
+    implicit : bool
+        Whether the method takes a nonlinear solver (default ``True``).
+    """
 
     name: str
     make: Callable[[NonlinearSolver | None], Method]
@@ -153,7 +177,26 @@ METHODS: dict[str, MethodSpec] = {
 def make_solver(
     name: str = "fixed-point", *, rtol: float | None = None, anderson: int = 0
 ) -> NonlinearSolver:
-    """The nonlinear solver called ``name`` (:data:`SOLVERS`)."""
+    """The nonlinear solver called ``name`` (:data:`SOLVERS`).
+
+    Parameters
+    ----------
+    name : str
+        ``"fixed-point"`` (default), ``"newton"`` or ``"newton-krylov"``.
+    rtol : float, optional
+        Relative tolerance (default: the solver's own).
+    anderson : int
+        Anderson memory of the fixed-point solver (default 0: none).
+
+    Returns
+    -------
+    NonlinearSolver
+
+    Raises
+    ------
+    ConfigError
+        An unknown name, or ``anderson`` for a solver other than the fixed-point one.
+    """
     spec = SOLVERS[choice(name, SOLVERS, "solver")]
     if anderson and not spec.anderson:
         raise ConfigError(f"anderson mixing is an option of the fixed-point solver, not {name!r}")

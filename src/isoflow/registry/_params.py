@@ -63,7 +63,26 @@ class Param:
     length: int | None = None
 
     def check(self, value: Any, what: str) -> Any:
-        """``value`` (a TOML/JSON value) checked against the kind, bounds and choices."""
+        """``value`` (a TOML/JSON value) checked against the kind, bounds and choices.
+
+        Parameters
+        ----------
+        value : object
+            The value (a list of :attr:`length` values for a vector parameter).
+        what : str
+            Names the parameter in the messages.
+
+        Returns
+        -------
+        object
+            The value converted to the kind (a list for a vector parameter).
+
+        Raises
+        ------
+        ConfigError
+            The wrong kind or length, a non-finite float, a value out of the bounds or not
+            one of the choices.
+        """
         if self.length is None:
             return self._check_one(value, what)
         if not isinstance(value, list | tuple) or len(value) != self.length:
@@ -106,7 +125,20 @@ class Param:
         return out
 
     def parse(self, text: str, what: str) -> Any:
-        """The value of a command-line word ``text`` (then :meth:`check`-ed)."""
+        """The value of a command-line word ``text`` (then :meth:`check`-ed).
+
+        Parameters
+        ----------
+        text : str
+            The word; a vector parameter is written ``a,b`` or ``[a,b]``.
+        what : str
+            Names the parameter in the messages.
+
+        Raises
+        ------
+        ConfigError
+            As :meth:`check`, or a malformed list.
+        """
         if self.length is not None:
             body = text.strip()
             if body.startswith("[") or body.endswith("]"):
@@ -140,7 +172,13 @@ class Param:
         return text
 
     def value(self, checked: Any) -> Any:
-        """What the model function gets for a :meth:`check`-ed value (a tuple for lists)."""
+        """What the model function gets for a :meth:`check`-ed value (a tuple for lists).
+
+        Parameters
+        ----------
+        checked : object
+            A value returned by :meth:`check`.
+        """
         return tuple(checked) if self.length is not None else checked
 
     def kind_text(self) -> str:
@@ -223,6 +261,21 @@ def parse_param(spec: ModelSpec, key: str, text: str) -> Any:
     model without declared parameters the text is read as a TOML value (``3`` an integer,
     ``0.5`` a float, ``true`` a boolean, ``[1, 2]`` an array), or kept as a string; text that
     starts like a TOML array, table or quoted string but does not parse is an error.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The model.
+    key : str
+        The parameter's name.
+    text : str
+        The value as typed.
+
+    Raises
+    ------
+    ConfigError
+        A key the model does not declare, a value the declared parameter refuses, or text that
+        looks like TOML but does not parse.
     """
     if spec.params is not None:
         if key not in spec.params:
@@ -245,5 +298,17 @@ def parse_params(spec: ModelSpec, texts: Iterable[tuple[str, str]]) -> dict[str,
 
     Each text is read by :func:`parse_param`; a key given twice keeps its last value (an
     option later on the command line overrides an earlier one).
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The model.
+    texts : iterable of (str, str)
+        The ``(key, text)`` pairs, in command-line order.
+
+    Returns
+    -------
+    dict
+        Parameter name to value.
     """
     return {key: parse_param(spec, key, text) for key, text in texts}

@@ -199,5 +199,24 @@ def to_grid(
     ``(*batch, ntheta, nphi)`` (default grid: :func:`~isoflow.sphere._grid.default_grid_shape`
     of degree ``lmax``, default ``N - 1``). The coefficient transform is done once for the
     whole batch.
+
+    Parameters
+    ----------
+    W : array_like, shape (*batch, N, N)
+        Vorticity matrices in ``su(N)`` (complex).
+    ntheta, nphi : int, optional
+        Number of rings in latitude and of points in longitude (default
+        ``(2 lmax + 2, 4 lmax + 4)``; see :func:`~isoflow.sphere.synthesize`).
+    geometry : {"CC", "GL", "F1"}
+        The grid: Clenshaw–Curtis (default; equiangular, both poles included),
+        Gauss–Legendre, or Fejér's first rule (equiangular, no poles); see
+        :func:`~isoflow.sphere.grid`.
+    lmax : int, optional
+        Highest degree kept (default ``N - 1``).
+
+    Returns
+    -------
+    ndarray, shape (*batch, ntheta, nphi)
+        The real values of :math:`\omega`, rings from north to south.
     """
     return synthesize(to_coefficients(W, lmax), ntheta, nphi, geometry=geometry)

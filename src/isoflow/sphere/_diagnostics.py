@@ -134,6 +134,11 @@ def energy_spectrum(data: ArrayLike) -> Array:
 
     Same input as :func:`enstrophy_spectrum`. :math:`\sum_l E_l = 2H` (:func:`energy`).
 
+    Parameters
+    ----------
+    data : array_like, shape (*batch, N, N) or (*batch, n_coefficients)
+        Vorticity matrices (complex) or real coefficients of :math:`\omega`.
+
     Returns
     -------
     ndarray, shape (*batch, lmax)
@@ -151,6 +156,11 @@ def angular_momentum(W: ArrayLike) -> Array:
     :math:`L = \sqrt{4\pi/3}\,(\omega_{11}, \omega_{1,-1}, \omega_{10})` in the real
     coefficients. On a non-rotating sphere all three are conserved (and so by IsoMP); on a
     rotating sphere only :math:`L_z`.
+
+    Parameters
+    ----------
+    W : array_like, shape (*batch, N, N)
+        Vorticity matrices in ``su(N)`` (complex).
 
     Returns
     -------

@@ -47,6 +47,23 @@ def degree_rates(
     r"""The rates :math:`c_l = \nu\lambda_l + \nu_p\lambda_l^p + \alpha`,
     :math:`\lambda_l = l(l+1)`, ``l = 0..N-1``.
 
+    Parameters
+    ----------
+    N : int
+        Matrix size (degrees ``0..N-1``).
+    viscosity : float
+        :math:`\nu \ge 0` (default 0), finite.
+    hyperviscosity : (float, float), optional
+        ``(nu_p, p)``: the coefficient :math:`\nu_p \ge 0` and the order :math:`p \ge 1` of
+        the term :math:`\nu_p\lambda_l^p` (default: none).
+    drag : float
+        :math:`\alpha \ge 0` (default 0), finite: a linear drag on every degree.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        :math:`c_l` for ``l = 0..N-1``.
+
     Raises
     ------
     ParameterError
@@ -258,6 +275,21 @@ class SphereDissipation(LinearPart):
         return out
 
     def compiled(self, taus: Sequence[float], algebra: Any) -> Any:
+        """The record the compiled split stage applies for the half steps ``taus``.
+
+        Parameters
+        ----------
+        taus : sequence of float
+            The lengths of the half steps of one step.
+        algebra : Algebra
+            The problem's space (unused here: the part holds its ``N``).
+
+        Returns
+        -------
+        object
+            A uniform decay when every degree has the same rate, else the per-diagonal
+            folded flows of :mod:`isoflow.sphere.compiled`.
+        """
         from .compiled import SphereFlow
 
         c = self.uniform_rate

@@ -58,6 +58,28 @@ def grid(ntheta: int, nphi: int, geometry: str = "CC") -> tuple[Array, Array]:
     ``"CC"``: :math:`\theta_i = \pi i/(n_\theta - 1)` (poles included); ``"F1"``:
     :math:`\theta_i = \pi (i + \tfrac12)/n_\theta`; ``"GL"``: the Gauss–Legendre nodes
     (:math:`\cos\theta_i` descending). Latitude is :math:`\pi/2 - \theta`.
+
+    Parameters
+    ----------
+    ntheta : int
+        Number of rings (at least 2).
+    nphi : int
+        Number of points per ring (at least 1).
+    geometry : {"CC", "GL", "F1"}
+        Clenshaw–Curtis (default), Gauss–Legendre or Fejér's first rule.
+
+    Returns
+    -------
+    theta : ndarray, shape (ntheta,)
+        Colatitudes in radians.
+    phi : ndarray, shape (nphi,)
+        Longitudes in radians.
+
+    Raises
+    ------
+    ParameterError
+        An unknown ``geometry``, or ``ntheta`` or ``nphi`` not an integer at least the
+        minimum.
     """
     geometry = _check_geometry(geometry)
     ntheta = check_N(ntheta, "ntheta", minimum=2)
@@ -279,6 +301,31 @@ def from_function(
     ``lmax`` (for a band-limited ``f`` of degree
     :math:`\le 2\,\mathrm{oversampling}\,(l_{max}+1) - 1 - l_{max}` the quadrature, and so the
     result, is exact). The mean of ``f`` is dropped (see :func:`analyze`).
+
+    Parameters
+    ----------
+    f : callable
+        ``f(colatitude, longitude) -> values``, radians in, real values out (complex values
+        with a negligible imaginary part are accepted).
+    lmax : int
+        Highest degree (at least 1).
+    oversampling : int
+        Rings of the grid per ``lmax + 1`` (at least 1, default 2).
+    nthreads : int
+        Threads of the ``ducc0`` transform (default 1).
+
+    Returns
+    -------
+    ndarray, shape ((lmax+1)^2 - 1,)
+
+    Raises
+    ------
+    ParameterError
+        ``f`` not callable, or a bad ``lmax`` or ``oversampling``.
+    ShapeError
+        Values that do not broadcast to the grid.
+    DtypeError, NonFiniteError
+        Values that are not real numbers, or not finite.
     """
     lmax = check_N(lmax, "lmax", minimum=1)
     if not callable(f):

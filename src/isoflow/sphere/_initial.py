@@ -52,6 +52,19 @@ def random_coefficients(
     vorticity ``rms``: :math:`\frac1{4\pi}\int\omega^2 dA = \frac1{4\pi}\sum\omega_{lm}^2 =
     \mathrm{rms}^2` (enstrophy :math:`2\pi\,\mathrm{rms}^2`).
 
+    Parameters
+    ----------
+    lmax : int
+        Highest degree of the band (at least 1); also the size of the result.
+    lmin : int
+        Lowest degree of the band (default 1, at most ``lmax``); lower degrees are zero.
+    slope : float, optional
+        Exponent ``s`` of the expected energy spectrum; default ``None``, white in the band.
+    rms : float
+        The root-mean-square vorticity (positive, default 1).
+    seed : int, numpy.random.Generator or None
+        Seed of the coefficients (default 0; :func:`numpy.random.default_rng` semantics).
+
     Returns
     -------
     ndarray, shape ((lmax+1)^2 - 1,)
@@ -88,6 +101,32 @@ def random_vorticity(
     r"""A seeded random smooth vorticity matrix in ``su(N)`` (see :func:`random_coefficients`).
 
     ``lmax`` defaults to ``min(10, N - 1)``; it must be ``<= N - 1``.
+
+    Parameters
+    ----------
+    N : int
+        Matrix size.
+    lmin : int
+        Lowest degree of the band (default 1).
+    lmax : int, optional
+        Highest degree of the band, at most ``N - 1`` (default ``min(10, N - 1)``).
+    slope : float, optional
+        Exponent of the expected energy spectrum :math:`E_l \propto l^{s}` (default
+        ``None``: white in the band).
+    rms : float
+        The root-mean-square vorticity (positive, default 1).
+    seed : int, numpy.random.Generator or None
+        Seed of the coefficients (default 0).
+
+    Returns
+    -------
+    ndarray, shape (N, N)
+        A matrix in ``su(N)`` (complex).
+
+    Raises
+    ------
+    ParameterError
+        ``lmax > N - 1``, ``lmin > lmax``, a non-positive ``rms``, or a bad ``seed``.
     """
     N = check_N(N)
     lmax = min(10, N - 1) if lmax is None else check_N(lmax, "lmax", minimum=1)
@@ -105,6 +144,20 @@ def vorticity_from_function(
     ``f(colatitude, longitude)`` (radians, broadcastable arrays) is sampled on a
     Gauss–Legendre grid and transformed (``ducc0``) to its coefficients up to degree
     ``N - 1`` (:func:`~isoflow.sphere.from_function`); the mean of ``f`` is dropped.
+
+    Parameters
+    ----------
+    f : callable
+        ``f(colatitude, longitude) -> values`` (real).
+    N : int
+        Matrix size.
+    oversampling : int
+        Rings of the sampling grid per ``N`` (at least 1, default 2).
+
+    Returns
+    -------
+    ndarray, shape (N, N)
+        A matrix in ``su(N)`` (complex).
     """
     N = check_N(N)
     return _from_coefficients(from_function(f, N - 1, oversampling=oversampling), N)

@@ -80,6 +80,15 @@ def cross_casimirs(Theta: ArrayLike, W: ArrayLike, kmax: int = 5) -> Array:
     Computed from one eigendecomposition of :math:`-i\Theta` (:math:`H_k = \frac{4\pi}{N}
     \sum_i d_i\lambda_i^k`, :math:`d_i` the diagonal of :math:`-iW` in its eigenvectors).
 
+    Parameters
+    ----------
+    Theta : array_like, shape (*batch, N, N)
+        Magnetic potentials in ``su(N)`` (complex).
+    W : array_like, shape (*batch, N, N)
+        Vorticities of the same shape.
+    kmax : int
+        Highest power ``k`` (at least 1, default 5).
+
     Returns
     -------
     ndarray, shape (*batch, kmax)

@@ -157,7 +157,18 @@ def helmholtz_solve(W, out, inv_piv, mult, shift):  # type: ignore[no-untyped-de
     :math:`\Delta_N`'s structure whose every diagonal block is definite (the quasi-geostrophic
     :math:`\Delta_N - \kappa^2 - F\,\tfrac12\{Z^2, \cdot\}`; ``inv_piv``, ``mult`` from
     ``isoflow.sphere._operators.factor_diagonals``). ``O(N^2)``: two sweeps, as
-    :func:`poisson_solve`, without its trace handling (the trace is part of the solution)."""
+    :func:`poisson_solve`, without its trace handling (the trace is part of the solution).
+
+    Parameters
+    ----------
+    W : complex128[N, N]
+    out : complex128[N, N]
+        Written entirely; must not be ``W``.
+    inv_piv, mult : float64[N, N]
+        The factorization of ``A``.
+    shift : complex128[N] or float64[N]
+        The diagonal subtracted from ``W`` before the solve.
+    """
     _sweeps(W, shift, out, inv_piv, mult)
 
 
@@ -171,7 +182,21 @@ def qg_field(W, out, inv_piv, mult, inv_hbar, planetary):  # type: ignore[no-unt
     The model's states have zero mean potential vorticity (a Casimir); the trace IsoMP's stage
     carries (``O(h^2)``) is ignored, as Euler's field ignores it, and the trace of
     :math:`\Psi` (it commutes with everything, but would rescale the Cayley map's step) is
-    removed: the step tends to Euler's as ``F, kappa -> 0``."""
+    removed: the step tends to Euler's as ``F, kappa -> 0``.
+
+    Parameters
+    ----------
+    W : complex128[N, N]
+        The potential vorticity ``Q`` (a trace is ignored).
+    out : complex128[N, N]
+        Written with ``B``; must not be ``W``.
+    inv_piv, mult : float64[N, N]
+        The factorization of ``A`` (:func:`isoflow.models.qg_operator`).
+    inv_hbar : float
+        :math:`1/\hbar`.
+    planetary : float64[N] or complex128[N]
+        The diagonal of the planetary vorticity ``F``.
+    """
     N = W.shape[0]
     tr = 0.0j
     for a in range(N):
@@ -198,6 +223,19 @@ def euler_field(W, out, inv_piv, mult, inv_hbar, shift):  # type: ignore[no-unty
     ``W`` may have a trace (the IsoMP stage lies in ``u(N)``); it is ignored. ``shift`` is
     the diagonal of the constant part of ``B`` (zero on a non-rotating sphere, see
     :func:`isoflow.models.euler_sphere`).
+
+    Parameters
+    ----------
+    W : complex128[N, N]
+        The vorticity matrix (or an IsoMP stage).
+    out : complex128[N, N]
+        Written with ``B``; must not be ``W``.
+    inv_piv, mult : float64[N, N]
+        The factorization from :func:`isoflow.sphere.laplacian_coefficients`.
+    inv_hbar : float
+        :math:`1/\hbar`.
+    shift : complex128[N]
+        The diagonal of the constant part of ``B``.
     """
     poisson_solve(W, out, inv_piv, mult)
     N = W.shape[0]
@@ -217,6 +255,23 @@ def euler_double_bracket_field(W, out, inv_piv, mult, inv_hbar, shift, hbar, alp
     isospectral (every Casimir kept), while the energy decreases at the rate
     :math:`\frac{4\pi}{N}\alpha\|[\Psi, W]\|_F^2` (``docs/theory/forced.rst``). Two matrix
     products per evaluation (BLAS).
+
+    Parameters
+    ----------
+    W : complex128[N, N]
+        The vorticity matrix.
+    out : complex128[N, N]
+        Written with ``B``; must not be ``W``.
+    inv_piv, mult : float64[N, N]
+        The factorization from :func:`isoflow.sphere.laplacian_coefficients`.
+    inv_hbar : float
+        :math:`1/\hbar`.
+    shift : complex128[N]
+        As in :func:`euler_field` (scaled by ``hbar`` into :math:`\Psi`).
+    hbar : float
+        :math:`\hbar`.
+    alpha : float
+        The selective-decay coefficient :math:`\alpha` (0: Euler's field).
     """
     poisson_solve(W, out, inv_piv, mult)
     N = W.shape[0]
@@ -236,6 +291,23 @@ def mhd_field(W, out, inv_piv, mult, diag, gamma, inv_hbar, shift):  # type: ign
     (:func:`laplacian_apply`; the trace of a stage's :math:`\Theta` is in the kernel of
     :math:`\Delta_N` and drops out). The ``f(W, out, *args)`` of
     :func:`isoflow.models.mhd_sphere`'s :class:`~isoflow.CompiledB` kernel.
+
+    Parameters
+    ----------
+    W : complex128[2, N, N]
+        The pair ``(Theta, Q)``.
+    out : complex128[2, N, N]
+        Written with ``B``; must not be ``W``.
+    inv_piv, mult : float64[N, N]
+        The factorization from :func:`isoflow.sphere.laplacian_coefficients`.
+    diag : float64[N, N]
+        The diagonal coefficients of :math:`\Delta_N` (:func:`laplacian_apply`).
+    gamma : float64[N + 1]
+        The off-diagonal coefficients :math:`\gamma_a` (:func:`laplacian_apply`).
+    inv_hbar : float
+        :math:`1/\hbar`.
+    shift : complex128[N]
+        The diagonal of the constant part of ``B``'s first field (:func:`euler_field`).
     """
     euler_field(W[1], out[0], inv_piv, mult, inv_hbar, shift)
     laplacian_apply(W[0], out[1], diag, gamma)
@@ -247,21 +319,45 @@ def mhd_field(W, out, inv_piv, mult, diag, gamma, inv_hbar, shift):  # type: ign
 
 @numba.njit(cache=True)
 def laplacian_apply_batch(W, out, diag, gamma):  # type: ignore[no-untyped-def]
-    """:func:`laplacian_apply` on every member of stacked ``(M, N, N)`` matrices."""
+    """:func:`laplacian_apply` on every member of stacked ``(M, N, N)`` matrices.
+
+    Parameters
+    ----------
+    W, out : complex128[M, N, N]
+        The matrices and the results (``out`` must not be ``W``).
+    diag, gamma
+        As in :func:`laplacian_apply`.
+    """
     for k in range(W.shape[0]):
         laplacian_apply(W[k], out[k], diag, gamma)
 
 
 @numba.njit(cache=True)
 def helmholtz_solve_batch(W, out, inv_piv, mult, shift):  # type: ignore[no-untyped-def]
-    """:func:`helmholtz_solve` on every member of stacked ``(M, N, N)`` matrices."""
+    """:func:`helmholtz_solve` on every member of stacked ``(M, N, N)`` matrices.
+
+    Parameters
+    ----------
+    W, out : complex128[M, N, N]
+        The right-hand sides and the solutions (``out`` must not be ``W``).
+    inv_piv, mult, shift
+        As in :func:`helmholtz_solve`, the same for every member.
+    """
     for k in range(W.shape[0]):
         helmholtz_solve(W[k], out[k], inv_piv, mult, shift)
 
 
 @numba.njit(cache=True)
 def poisson_solve_batch(W, out, inv_piv, mult):  # type: ignore[no-untyped-def]
-    """:func:`poisson_solve` on every member of stacked ``(M, N, N)`` matrices."""
+    """:func:`poisson_solve` on every member of stacked ``(M, N, N)`` matrices.
+
+    Parameters
+    ----------
+    W, out : complex128[M, N, N]
+        The right-hand sides and the solutions (``out`` must not be ``W``).
+    inv_piv, mult
+        As in :func:`poisson_solve`.
+    """
     for k in range(W.shape[0]):
         poisson_solve(W[k], out[k], inv_piv, mult)
 
@@ -393,6 +489,16 @@ def dissipate(W, data, offe, offo):  # type: ignore[no-untyped-def]
     :math:`b_i = x_i - x_{n-1-i}` (real and imaginary parts apart), their products with the
     even and odd matrices, back; the diagonals then return to the matrix with their mirrors
     :math:`W_{i, i+m} = -\overline{W_{i+m, i}}` (exactly what the product would give).
+
+    Parameters
+    ----------
+    W : complex128[N, N]
+        The matrix, overwritten with the result.
+    data : float64[:]
+        The upper triangles of every diagonal's even and odd folded matrices, one after the
+        other (row by row).
+    offe, offo : int64[N]
+        Where diagonal ``m``'s even and odd matrix start in ``data``.
     """
     N = W.shape[0]
     half = (N + 1) // 2

@@ -129,6 +129,37 @@ def draw_map(
     The field is synthesized on an equiangular (Clenshaw–Curtis) grid, by default about two
     points per wavelength of degree ``lmax`` and at least ``90 x 180``; ``interpolation`` is
     matplotlib's (``"nearest"`` shows the grid cells and makes smaller PNG files).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (labelled in degrees of longitude and latitude).
+    data : array_like, shape (N, N) or (n_coefficients,)
+        One vorticity field: a matrix (complex) or real coefficients.
+    ntheta : int, optional
+        Number of grid rings in latitude (at least 2). Default: ``max(2 lmax + 2, 90)``.
+    nphi : int, optional
+        Number of grid points in longitude (at least 1). Default:
+        ``max(4 lmax + 4, 180)``.
+    vmax : float, optional
+        Colour limit (positive): the colours span ``[-vmax, vmax]``. Default: the largest
+        ``|omega|`` on the grid.
+    cmap : str
+        Name of a matplotlib colour map (default ``"RdBu_r"``).
+    interpolation : str
+        matplotlib's image interpolation (default ``"bilinear"``).
+
+    Returns
+    -------
+    matplotlib.image.AxesImage
+        The image (for a colour bar).
+
+    Raises
+    ------
+    ShapeError
+        ``data`` is not one field.
+    ParameterError
+        A bad ``ntheta``, ``nphi`` or ``vmax``.
     """
     c = _coefficients(data)
     if c.ndim != 1:
@@ -166,8 +197,33 @@ def draw_field_lines(
     magnetic potential :math:`\theta` (the field :math:`b = n\times\nabla\theta` is tangent to
     them, and stronger where they crowd); returns the contour set.
 
-    ``theta``: one magnetic potential, a matrix ``(N, N)`` (complex) or real coefficients.
-    ``levels`` equally spaced values strictly between the extremes of :math:`\theta`.
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes of a map drawn by :func:`draw_map`.
+    theta : array_like, shape (N, N) or (n_coefficients,)
+        One magnetic potential: a matrix (complex) or real coefficients.
+    levels : int
+        Number of lines (default 14), at equally spaced values strictly between the extremes
+        of :math:`\theta`.
+    ntheta, nphi : int, optional
+        Grid on which :math:`\theta` is synthesized, as in :func:`draw_map`. Default (also
+        for ``0``): ``max(2 lmax + 2, 90)`` rings and ``max(4 lmax + 4, 180)`` longitudes,
+        the grid of :func:`draw_map`'s default.
+    color : str
+        Colour of the lines (matplotlib colour, default ``"k"``).
+    linewidth : float
+        Width of the lines in points (default 0.6).
+
+    Returns
+    -------
+    matplotlib.contour.QuadContourSet or None
+        The contour set, or ``None`` for a constant potential (no field, no lines).
+
+    Raises
+    ------
+    ShapeError
+        ``theta`` is not one field.
     """
     c = _coefficients(theta)
     if c.ndim != 1:
@@ -224,7 +280,40 @@ def draw_orthographic(
 ) -> Any:
     """Draw the vorticity seen from above ``center = (latitude, longitude)`` [deg] into
     ``ax`` (orthographic projection of the visible hemisphere, ``resolution`` pixels across,
-    at least 3); returns the image."""
+    at least 3); returns the image.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (their frame is switched off, the aspect made equal).
+    data : array_like, shape (N, N) or (n_coefficients,)
+        One vorticity field: a matrix (complex) or real coefficients.
+    center : (float, float)
+        The viewpoint ``(latitude, longitude)`` in degrees (default ``(30, 0)``), a finite
+        latitude in ``[-90, 90]`` and a finite longitude.
+    resolution : int
+        Pixels across the disk (at least 3, default 200).
+    vmax : float, optional
+        Colour limit (positive): the colours span ``[-vmax, vmax]``. Default: the largest
+        ``|omega|`` on the visible disk.
+    cmap : str
+        Name of a matplotlib colour map (default ``"RdBu_r"``).
+    graticule : bool
+        Whether to draw the parallels (every 30 degrees up to ``±60``) and the meridians
+        (every 30 degrees); default ``True``.
+
+    Returns
+    -------
+    matplotlib.image.AxesImage
+        The image (for a colour bar).
+
+    Raises
+    ------
+    ShapeError
+        ``data`` is not one field.
+    ParameterError
+        A bad ``center``, ``resolution`` or ``vmax``.
+    """
     c = _coefficients(data)
     if c.ndim != 1:
         raise ShapeError(f"draw_orthographic: give one vorticity field, got shape {c.shape}")
@@ -276,7 +365,34 @@ def plot_map(
     ntheta: int | None = None,
     nphi: int | None = None,
 ) -> Figure:
-    """The vorticity of one matrix (or coefficient set) on a latitude–longitude map."""
+    """The vorticity of one matrix (or coefficient set) on a latitude–longitude map.
+
+    Parameters
+    ----------
+    data : array_like, shape (N, N) or (n_coefficients,)
+        One vorticity field: a matrix (complex) or real coefficients.
+    title : str, optional
+        Title of the axes. Default: ``"vorticity ω, N = ..., equirectangular map"`` (``N``
+        only when ``data`` is a matrix).
+    vmax : float, optional
+        Colour limit (positive): the colours span ``[-vmax, vmax]``. Default: the largest
+        ``|omega|`` on the grid.
+    cmap : str
+        Name of a matplotlib colour map (default ``"RdBu_r"``).
+    ntheta, nphi : int, optional
+        The synthesis grid, as in :func:`draw_map` (default: at least ``90 x 180``).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ShapeError
+        ``data`` is not one field.
+    ParameterError
+        A bad ``ntheta``, ``nphi`` or ``vmax``.
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(8, 4.2), layout="constrained")
@@ -302,6 +418,27 @@ def plot_mhd(
     ``(N, N)`` (complex) or real coefficients (the fields of a state of
     :func:`isoflow.models.mhd_sphere`, e.g. ``problem.algebra.split(y)``; subtract the
     Coriolis matrix from the second field on a rotating sphere).
+
+    Parameters
+    ----------
+    Theta : array_like, shape (N, N) or (n_coefficients,)
+        The magnetic potential :math:`\theta` of one state.
+    W : array_like, shape (N, N) or (n_coefficients,)
+        The (relative) vorticity :math:`\omega` of the same state.
+    title : str, optional
+        Title of the figure. Default: ``"MHD on the sphere, N = ..."`` (``N`` only when
+        ``W`` is a matrix).
+    levels : int
+        Number of field lines (default 14; :func:`draw_field_lines`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ShapeError
+        ``Theta`` or ``W`` is not one field.
     """
     from matplotlib.figure import Figure
 
@@ -335,7 +472,37 @@ def plot_orthographic(
     cmap: str = _CMAP,
     resolution: int = 200,
 ) -> Figure:
-    """The vorticity seen from one or more viewpoints ``(latitude, longitude)`` [deg]."""
+    """The vorticity seen from one or more viewpoints ``(latitude, longitude)`` [deg].
+
+    Parameters
+    ----------
+    data : array_like, shape (N, N) or (n_coefficients,)
+        One vorticity field: a matrix (complex) or real coefficients.
+    centers : sequence of (float, float)
+        The viewpoints ``(latitude, longitude)`` in degrees, one panel each (at least one;
+        default ``((30, 0), (30, 180))``); latitudes in ``[-90, 90]``.
+    title : str, optional
+        Title of the figure. Default: ``"vorticity ω, N = ..., orthographic views"`` (``N``
+        only when ``data`` is a matrix).
+    vmax : float, optional
+        Colour limit (positive), shared by the panels. Default: the largest ``|omega|`` on
+        the grid of :func:`draw_map`'s default resolution.
+    cmap : str
+        Name of a matplotlib colour map (default ``"RdBu_r"``).
+    resolution : int
+        Pixels across each disk (at least 3, default 200).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ShapeError
+        ``data`` is not one field.
+    ParameterError
+        A bad or empty ``centers``, a bad ``resolution`` or ``vmax``.
+    """
     from matplotlib.figure import Figure
 
     c = _coefficients(data)
@@ -449,6 +616,28 @@ def plot_energy_spectrum(
     ``reference_slopes`` draws dashed power laws :math:`l^{s}` for orientation. ``ylabel``
     replaces the kinetic spectrum's label (e.g. for magnetic spectra,
     :func:`~isoflow.sphere.magnetic_energy_spectrum`, drawn next to kinetic ones).
+
+    Parameters
+    ----------
+    spectra : mapping of str to array_like
+        Label to spectrum ``(lmax,)`` or vorticity matrix ``(N, N)``, one curve each.
+    title : str, optional
+        Title of the axes (default ``"energy spectrum"``).
+    reference_slopes : sequence of float
+        Exponents ``s`` of the dashed power laws (default ``(-3.0,)``; ``()`` for none).
+    ylabel : str, optional
+        Label of the vertical axis (default: the kinetic spectrum's formula).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ShapeError
+        No spectrum, or one that is not a vector or a square matrix.
+    NonFiniteError
+        A spectrum with NaN or Inf.
     """
     from matplotlib.figure import Figure
 
@@ -473,6 +662,30 @@ def plot_invariants(
     ``energy`` and ``enstrophy`` ``(n_t,)``: each curve is :math:`|I(t) - I(0)| / |I(0)|`
     (Casimirs of odd order, which may vanish initially, relative to
     :math:`\max_t |C_k|` instead).
+
+    Parameters
+    ----------
+    ts : array_like, shape (n_t,)
+        The times (finite, at least one).
+    casimirs : array_like, shape (n_t, K), optional
+        Casimirs ``C_2, ..., C_{K+1}`` at each time, drawn in the upper panel.
+    energy, enstrophy : array_like, shape (n_t,), optional
+        Energy and enstrophy at each time, drawn in the lower panel.
+    title : str, optional
+        Title of the figure (default ``"invariants against time"``).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ShapeError
+        A series of the wrong shape (not one value, or one row, per time).
+    NonFiniteError
+        A series with NaN or Inf.
+    ParameterError
+        A series that is not real.
     """
     from matplotlib.figure import Figure
 

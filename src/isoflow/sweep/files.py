@@ -57,7 +57,19 @@ MEMBER_STATUSES = ("finished", "failed")
 
 @dataclass(frozen=True)
 class TaskPaths:
-    """The files of one task."""
+    """The files of one task.
+
+    Parameters
+    ----------
+    h5 : Path
+        The result file, ``tasks/<id>.h5``.
+    json : Path
+        The summary, ``tasks/<id>.json``.
+    log : Path
+        The log, ``tasks/<id>.log``.
+    lock : Path
+        The lock file of the task's worker, ``tasks/<id>.lock``.
+    """
 
     h5: Path
     json: Path
@@ -124,7 +136,17 @@ def seal(summary: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def file_sha256(path: Path) -> str:
-    """The SHA-256 of a file's bytes (hex)."""
+    """The SHA-256 of a file's bytes (hex).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+
+    Returns
+    -------
+    str
+    """
     with path.open("rb") as fh:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
@@ -168,6 +190,22 @@ def write_manifest(
     **extra: Any,
 ) -> Path:
     """Create the directory layout and write ``sweep.json`` (``extra`` keys added).
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        The sweep directory (created with its ``tasks`` directory).
+    spec : SweepSpec
+        The sweep.
+    layouts : mapping of str to (dict or None)
+        Task id to its layout (:func:`~isoflow.sweep.task.task_layouts`).
+    **extra
+        Further keys of the manifest.
+
+    Returns
+    -------
+    Path
+        The manifest file.
 
     Raises
     ------

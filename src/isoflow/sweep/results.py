@@ -21,7 +21,17 @@ __all__ = ["open_sweep", "read_task", "saved_times", "status"]
 
 def saved_times(run: Mapping[str, Any]) -> np.ndarray:
     """The saved times of a sweep's time grid (the start, every ``save_every`` steps and the
-    last)."""
+    last).
+
+    Parameters
+    ----------
+    run : mapping
+        The sweep's run settings (``t0``, ``dt``, ``n_steps``, ``save_every``).
+
+    Returns
+    -------
+    ndarray, shape (n_saved,)
+    """
     steps = SaveGrid(int(run["save_every"]), int(run["n_steps"])).saved_steps()
     return float(run["t0"]) + steps.astype(float) * float(run["dt"])
 
@@ -47,6 +57,21 @@ def read_task(
     series ``(members, time, ...)`` (``invariants/<name>`` as ``invariants_<name>``, likewise
     ``observables/<name>``), on the sweep's time grid. One read of the file
     (:func:`isoflow.io.load`, every row checked).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The task's result file.
+    task_id : str
+        The task's id (checked against the file's ``sweep`` mark).
+    layout : mapping
+        The layout the manifest records for the task (:func:`~isoflow.sweep.task.layout_of`).
+    n_members : int
+        The task's number of members.
+
+    Returns
+    -------
+    dict of str to ndarray
 
     Raises
     ------

@@ -104,6 +104,24 @@ def build_task(spec: SweepSpec, task: Task) -> tuple[Any, Array, Any, dict[str, 
     The members of a task differ only in initial-data parameters
     (:attr:`isoflow.registry.ModelSpec.initial`), so the first member's problem is every
     member's.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    task : Task
+        One of ``spec.tasks``.
+
+    Returns
+    -------
+    problem : IsospectralProblem
+        The members' problem, with the members' ids (their noise keys).
+    Y : ndarray, shape (members, *shape)
+        The members' initial states.
+    method : Method
+        The sweep's method with its solver.
+    solve_kwargs : dict
+        ``t0``, ``dt``, ``n_steps`` and ``save_every`` of the run.
     """
     problem = None
     states = []
@@ -194,6 +212,13 @@ def watch_client(pid: int, interval: float = 0.25) -> None:
 
     The workers of a sweep's own ``LocalCluster`` run this so that they die with the client
     (``kill -9`` of ``isoflow sweep``) instead of finishing orphaned tasks. Idempotent.
+
+    Parameters
+    ----------
+    pid : int
+        The process to watch (this process's own id is ignored).
+    interval : float
+        Seconds between two checks (default 0.25).
     """
     if pid in _watching or pid == os.getpid():
         return
@@ -246,7 +271,20 @@ def _per_member(value: Any, m: int) -> list[float]:
 
 
 def layout_of(problem: Any, Y: Array) -> dict[str, Any]:
-    """Shapes and dtypes of a member's state and saved series (``Y``: members first)."""
+    """Shapes and dtypes of a member's state and saved series (``Y``: members first).
+
+    Parameters
+    ----------
+    problem : IsospectralProblem
+        The members' problem (which series are saved).
+    Y : ndarray, shape (members, *shape)
+        States, members first.
+
+    Returns
+    -------
+    dict
+        ``state_shape``, ``state_dtype`` and, per series, its ``shape`` and ``dtype``.
+    """
     from ..diagnostics import series
 
     shapes = {
@@ -261,6 +299,15 @@ def task_layouts(spec: SweepSpec) -> dict[str, dict[str, Any] | None]:
 
     One member is built per group of tasks that share a problem (the same parameters but the
     initial-data ones), so that the readers know the shape of a task's results before it ran.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+
+    Returns
+    -------
+    dict of str to (dict or None)
     """
     out: dict[str, dict[str, Any] | None] = {}
     known: dict[str, dict[str, Any] | None] = {}
