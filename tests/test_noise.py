@@ -116,6 +116,9 @@ def test_truncated_increments_stay_within_the_level() -> None:
         (lambda: noise.standard_normals(-1, [0], 0, 1, 1), "seed must be in"),
         (lambda: noise.standard_normals(1.5, [0], 0, 1, 1), "seed must be an integer"),
         (lambda: noise.brownian_increments(1, [0], 0, 1, 1, 0.0), "step h must be positive"),
+        (lambda: noise.brownian_increments(1, [0], 0, 1, 1, True), "step h must be positive"),
+        (lambda: noise.truncation_level(0.0), "step h must be positive"),  # was math's error
+        (lambda: noise.truncation_level(0.1, k=0.5), "truncation must be a number k >= 1"),
         (lambda: noise.brownian_increments(1, [0], 0, 1, 1, 0.1, truncation=0.5), "truncation"),
         (lambda: noise.standard_normals(1, [2**62], 0, 1, 16), "member id 4611686018427387904"),
     ],

@@ -515,6 +515,12 @@ def test_errors_are_typed() -> None:
 
 
 _W8 = sphere.random_vorticity(8, seed=2)
+
+
+def _axes():  # type: ignore[no-untyped-def]
+    return Figure().subplots()
+
+
 _STATES = np.stack([_W8, _W8])
 _E8 = sphere.energy_spectrum(_W8)
 
@@ -542,6 +548,10 @@ _E8 = sphere.energy_spectrum(_W8)
          r"draw_map: ntheta must be >= 2, got 0"),
         (lambda p: sphere.plot_map(_W8, vmax=0.0), iso.ParameterError,
          r"draw_map: vmax must be a positive finite number, got 0.0"),
+        (lambda p: sphere.figures.draw_field_lines(_axes(), _W8, ntheta=0), iso.ParameterError,
+         r"draw_field_lines: ntheta must be >= 2, got 0"),  # was the default grid, silently
+        (lambda p: sphere.figures.draw_field_lines(_axes(), _W8, nphi=2.5), iso.ParameterError,
+         r"draw_field_lines: nphi must be an integer, got 2.5"),
         (lambda p: sphere.plot_map(_W8, vmax=np.nan), iso.ParameterError,
          r"vmax must be a positive finite number, got nan"),
         (lambda p: sphere.animate(_STATES, p / "a.gif", fps=0), iso.ParameterError,

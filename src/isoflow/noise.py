@@ -247,8 +247,23 @@ def truncation_level(h: float, k: float = 2.0) -> float:
     Returns
     -------
     float
+
+    Raises
+    ------
+    ParameterError
+        A non-positive or non-finite ``h``, or ``k`` below 1.
     """
-    return math.sqrt(2.0 * k * max(abs(math.log(h)), 1.0))
+    h = _step(h)
+    return math.sqrt(2.0 * _truncation(k) * max(abs(math.log(h)), 1.0))
+
+
+def _step(h: Any) -> float:
+    """``h`` as a float, if it is a positive finite number (not a bool)."""
+    if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)):
+        raise ParameterError(f"the step h must be positive and finite, got {h!r}")
+    if not (math.isfinite(h) and h > 0):
+        raise ParameterError(f"the step h must be positive and finite, got {h!r}")
+    return float(h)
 
 
 def brownian_increments(
@@ -291,11 +306,10 @@ def brownian_increments(
         A non-positive or non-finite ``h``, a bad ``truncation``, or what
         :func:`standard_normals` refuses.
     """
-    if not (isinstance(h, (int, float, np.floating)) and math.isfinite(h) and h > 0):
-        raise ParameterError(f"the step h must be positive and finite, got {h!r}")
+    h = _step(h)
     clip = None
     if truncation is not None:
-        clip = truncation_level(float(h), _truncation(truncation))
+        clip = truncation_level(h, _truncation(truncation))
     z = standard_normals(seed, members, k0, nsteps, count, stream=stream, clip=clip)
     z *= math.sqrt(h)
     return z

@@ -207,9 +207,9 @@ def draw_field_lines(
         Number of lines (default 14), at equally spaced values strictly between the extremes
         of :math:`\theta`.
     ntheta, nphi : int, optional
-        Grid on which :math:`\theta` is synthesized, as in :func:`draw_map`. Default (also
-        for ``0``): ``max(2 lmax + 2, 90)`` rings and ``max(4 lmax + 4, 180)`` longitudes,
-        the grid of :func:`draw_map`'s default.
+        Grid on which :math:`\theta` is synthesized, as in :func:`draw_map` (at least 2
+        rings and 1 longitude). Default: ``max(2 lmax + 2, 90)`` rings and
+        ``max(4 lmax + 4, 180)`` longitudes, the grid of :func:`draw_map`'s default.
     color : str
         Colour of the lines (matplotlib colour, default ``"k"``).
     linewidth : float
@@ -224,13 +224,18 @@ def draw_field_lines(
     ------
     ShapeError
         ``theta`` is not one field.
+    ParameterError
+        A bad ``ntheta`` or ``nphi`` (``0`` included).
     """
     c = _coefficients(theta)
     if c.ndim != 1:
         raise ShapeError(f"draw_field_lines: give one magnetic potential, got shape {c.shape}")
     lmax = lmax_of(c.shape[-1], "draw_field_lines")
     dt, dp = default_grid_shape(lmax)
-    ntheta, nphi = ntheta or max(dt, 90), nphi or max(dp, 180)
+    ntheta = (
+        max(dt, 90) if ntheta is None else check_N(ntheta, "draw_field_lines: ntheta", minimum=2)
+    )
+    nphi = max(dp, 180) if nphi is None else check_N(nphi, "draw_field_lines: nphi", minimum=1)
     vals = synthesize(c, ntheta, nphi, geometry="CC")
     vals = np.concatenate([vals, vals[:, :1]], axis=1)  # close the longitude circle
     lon = np.linspace(0.0, 360.0, nphi + 1)
