@@ -156,3 +156,16 @@ def test_the_split_step_runs_it_compiled(N: int) -> None:
     assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12 * np.max(np.abs(y0))
     plain = iso.solve(prob, iso.Strang(iso.IsoMP()), y0, **kw)  # the same flow
     assert np.max(np.abs(fast.ys - plain.ys)) <= 1e-6 * np.max(np.abs(y0))
+
+
+def test_the_named_method_defaults_to_a_loose_tolerance() -> None:
+    """``isomp-cayley`` in a configuration (the command line, sweeps): ``rtol = 1e-8`` unless
+    given, recorded in the normalized configuration (so a resume rebuilds the same solver)."""
+    from isoflow.registry import build, normalize_config
+
+    cfg = {"model": "rigid-body", "method": "isomp-cayley", "dt": 0.1, "n_steps": 3}
+    assert normalize_config(cfg)["rtol"] == 1e-8
+    assert normalize_config(cfg | {"rtol": 1e-12})["rtol"] == 1e-12
+    assert normalize_config(cfg | {"method": "isomp"})["rtol"] is None  # the solver's 1e-14
+    _prob, _y0, method, _kw = build(cfg)
+    assert method.name == "IsoMP (Cayley update)" and method.solver.rtol == 1e-8

@@ -84,7 +84,9 @@ def add_parser(sub: Any) -> None:
     run.add_argument("--method", help="a method of 'isoflow list methods' (default isomp)")
     run.add_argument("--solver", help=f"one of: {solvers} (default fixed-point)")
     run.add_argument(
-        "--rtol", type=positive_float, help="nonlinear solver tolerance (default 1e-14)"
+        "--rtol",
+        type=positive_float,
+        help="nonlinear solver tolerance (default 1e-14; 1e-8 for isomp-cayley)",
     )
     run.add_argument(
         "--anderson",

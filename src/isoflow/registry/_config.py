@@ -123,6 +123,8 @@ def normalize_config(config: Mapping[str, Any], *, model: ModelSpec | None = Non
             rtol = _number(rtol, float, "rtol")
             if rtol <= 0:
                 raise ConfigError(f"rtol must be positive, got {rtol!r}")
+        else:
+            rtol = METHODS[method].default_rtol  # None: the solver's own default
         anderson = _number(config.get("anderson", 0), int, "anderson")
         if not 0 <= anderson <= ANDERSON_MAX:
             raise ConfigError(f"anderson must be in 0..{ANDERSON_MAX}, got {anderson}")

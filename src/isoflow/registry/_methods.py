@@ -107,12 +107,17 @@ class MethodSpec:
         One line for ``isoflow list methods``.
     implicit : bool
         Whether the method takes a nonlinear solver (default ``True``).
+    default_rtol : float or None
+        The solver tolerance a configuration without ``rtol`` gets (default ``None``: the
+        solver's own; ``1e-8`` for ``isomp-cayley``, whose update keeps the spectrum whatever
+        the tolerance).
     """
 
     name: str
     make: Callable[[NonlinearSolver | None], Method]
     description: str
     implicit: bool = True
+    default_rtol: float | None = None
 
 
 def _composed(base: Callable[..., Method], scheme: str) -> Callable[[Any], Method]:
@@ -139,8 +144,9 @@ METHODS: dict[str, MethodSpec] = {
     "isomp-cayley": MethodSpec(
         "isomp-cayley",
         lambda solver: IsoMP(solver=solver or FixedPoint(), update="cayley"),
-        "IsoMP finished by the Cayley factor: isospectral to rounding at any tolerance, for a "
-        "loose one (e.g. rtol = 1e-8); so, u, su, sym, herm",
+        "IsoMP finished by the Cayley factor: isospectral to rounding at any tolerance (default "
+        "rtol 1e-8); so, u, su, sym, herm",
+        default_rtol=1e-8,
     ),
     "rk4": MethodSpec("rk4", lambda solver: RK4(), "classical RK4 (explicit)", implicit=False),
     "stochastic-isomp": MethodSpec(
