@@ -19,10 +19,10 @@ and the trace is removed on ``su(n)``.
 library the BLAS layout calls) and applied by two products: 1.43 ms against 1.84 for two
 solves with ``n`` right-hand sides at ``n = 128`` (complex, one thread; 10.6 against 12.6 ms
 at ``n = 256``), since LAPACK's triangular solves run well below the product's speed at these
-sizes. ``A = I - \tfrac h2 B`` with :math:`\|\tfrac h2 B\|_2 < 1` in any step the fixed
-point converges in (its contraction is about :math:`h\|B\|`), so :math:`A` is well
-conditioned (:math:`\kappa_2 \le (1 + \|K\|)/(1 - \|K\|)`, ``K = h/2 B``, as ``K`` is
-normal) and the inverse is as accurate as the solves.
+sizes. ``A = I - K`` with ``K = h/2 B`` skew-Hermitian, so normal with imaginary eigenvalues
+:math:`i\lambda`: the singular values of ``A`` are :math:`\sqrt{1 + \lambda^2} \ge 1` and
+:math:`\kappa_2(A) = \sqrt{1 + \|K\|_2^2}`, whatever the step, and the inverse is as
+accurate as the solves.
 """
 
 from __future__ import annotations

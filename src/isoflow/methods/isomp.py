@@ -65,12 +65,14 @@ increment is formed without cancellation from the inverse of ``A`` and two produ
     Y = A^{-1} W_k, \qquad Z = \big(A^{-1} Y^\dagger\big)^\dagger = A^{-1} W_k A^{-\dagger},
     \qquad W_{k+1} - W_k = 4Z - 2Y - 2\epsilon Y^\dagger,
 
-added with the compensation above. ``A`` is well conditioned (``h/2 B`` is normal with a norm
-below 1 wherever the fixed point converges), so its inverse is as accurate as solves, and
-faster at these sizes. The finish costs the inverse, two products and the passes: about two
-fixed-point iterations. It pays where a tight tolerance costs more iterations than that
-(measured, ``docs/user_guide/solvers.rst``: Euler on the sphere at ``N = 128``); the stage
-tolerance then sets the energy error's part from the solve, not the Casimirs.
+added with the compensation above. ``A`` is well conditioned (``K = h/2 B`` is skew, so
+:math:`\kappa_2(A) = \sqrt{1 + \|K\|_2^2}` at any step), so its inverse is as accurate as
+solves, and faster at these sizes. The finish costs the inverse, two products and the passes:
+about two fixed-point iterations (on the NumPy path also one more evaluation of ``B``, at the
+accepted stage; the compiled loops keep it from the last iteration). It pays where a tight
+tolerance costs more iterations than that (measured, ``docs/user_guide/solvers.rst``: Euler
+on the sphere up to ``N = 128``); the stage tolerance then sets the energy error's part from
+the solve, not the Casimirs.
 """
 
 from __future__ import annotations
