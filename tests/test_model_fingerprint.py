@@ -154,6 +154,50 @@ def test_files_without_a_fingerprint_resume_as_before(tmp_path: Path) -> None:
     assert sol.success
 
 
+def test_changed_method_settings_are_refused_and_force_resumes(tmp_path: Path) -> None:
+    """The method's name was the only check: a resume with another tolerance or compensation
+    continued the run on another path without a word."""
+    base, y0 = iso.models.rigid_body(n=4)
+    path = killed_run(base, y0, tmp_path / "run.h5")
+    before = path.read_bytes()
+    full = io.load(tmp_path / "full.h5")
+    for method, change in (
+        (iso.IsoMP(solver=iso.FixedPoint(rtol=1e-10)), "solver.rtol: 1e-14 -> 1e-10"),
+        (iso.IsoMP(compensated=False), "compensated: True -> False"),
+        (iso.IsoMP(extrapolation_order=2), "extrapolation_order: None -> 2"),
+        (iso.IsoMP(solver=iso.Newton()), "solver.class: 'FixedPoint' -> 'Newton'"),
+    ):
+        with pytest.raises(iso.ResultFileError) as err:
+            io.resume(path, problem=base, method=method, progress=False)
+        msg = str(err.value)
+        assert "\n" not in msg and "the method's settings changed" in msg and change in msg, msg
+        assert path.read_bytes() == before  # untouched
+    forced = io.resume(path, problem=base, method=iso.IsoMP(compensated=False), progress=False,
+                       force=True)  # fmt: skip
+    assert forced.success
+    (tmp_path / "b").mkdir()
+    again = killed_run(base, y0, tmp_path / "b" / "again.h5")
+    io.resume(again, problem=base, method=iso.IsoMP(), progress=False)  # the same settings
+    assert io.load(again).ys.tobytes() == full.ys.tobytes()
+
+
+def test_files_without_method_settings_resume_as_before(tmp_path: Path) -> None:
+    base, y0 = iso.models.rigid_body(n=4)
+    path = killed_run(base, y0, tmp_path / "old.h5")
+    view = ReadView(path)
+    data = bytearray(path.stat().st_size)
+    view.readinto(data)
+    view.close()
+    path.write_bytes(bytes(data))
+    with h5py.File(path, "r+") as f:  # as written before method settings were recorded
+        meta = json.loads(f.attrs["meta"])
+        del meta["method_settings"]
+        f.attrs["meta"] = json.dumps(meta)
+        f.attrs["header_crc"] = header_crc(f.attrs["config"], f.attrs["meta"])
+    method = iso.IsoMP(solver=iso.FixedPoint(rtol=1e-12))
+    assert io.resume(path, problem=base, method=method, progress=False).success
+
+
 def test_b_undefined_near_the_initial_state_is_probed_at_it() -> None:
     base, y0 = iso.models.rigid_body(n=3)
 

@@ -39,6 +39,7 @@ from ._compile_clock import CompileClock
 from ._errors import IsoflowError, ResultWriteError
 from ._failures import MemberFailures, describe, exception_for
 from ._fingerprint import model_fingerprint
+from ._method_settings import method_settings
 from ._save_grid import SaveGrid
 from ._solution import RUN_FAILED, RUN_FINISHED, RUN_INTERRUPTED, RunState, Solution, SolveStats
 from ._status_lines import StatusLines
@@ -213,6 +214,7 @@ class OpenRun:
             "n_steps": self.grid.k_final,
             "save_every": self.grid.every,
             "method": self.method.name,
+            "method_settings": method_settings(self.method),
             "algebra": alg.name,
             "state_shape": list(W.shape),
             "core_shape": list(alg.shape),

@@ -33,6 +33,7 @@ from .._errors import ModelChangedError, ParameterError, ResultFileError
 from .._failures import MemberFailures
 from .._fingerprint import fingerprint_changes, model_fingerprint
 from .._flags import check_flag
+from .._method_settings import method_settings, settings_changes
 from .._solution import RUN_FINISHED, SolveStats
 from .._solve import RunState, Solution, check_continue_options, check_restart, continue_run
 from .._time_loop import failure_fields
@@ -102,6 +103,20 @@ def _check_model(
         )
 
 
+def _check_method(p: Path, meta: dict[str, Any], method: Method, force: bool) -> None:
+    """Refuse (unless ``force``) a method whose settings differ from those the file recorded
+    when its run started (files written before settings were recorded have none)."""
+    if force:
+        return
+    changes = settings_changes(meta.get("method_settings"), method_settings(method))
+    if changes:
+        raise ResultFileError(
+            f"{p}: the method's settings changed since the run started ({'; '.join(changes)}); "
+            "resuming would continue on another path: give the run's method, or resume with "
+            "force=True (isoflow run --resume FILE --force) to continue with this one anyway"
+        )
+
+
 def resume(
     path: str | os.PathLike[str],
     *,
@@ -144,7 +159,8 @@ def resume(
         (recorded in the file; 256 rows and 1 s for files that predate the record).
     force : bool
         Resume although the model differs from the one the run started with (see
-        :class:`~isoflow.ModelChangedError`); the file keeps the fingerprint of the first.
+        :class:`~isoflow.ModelChangedError`), or the method's settings do (its solver's
+        tolerance, say); the file keeps the records of the first.
     threads : None, int or dict
         As in :func:`isoflow.solve`.
     status_every : float or None
@@ -166,7 +182,8 @@ def resume(
         written before isoflow recorded fingerprints are resumed without this check.
     ResultFileError
         Another process writes the file; the file is damaged or crafted; or the problem or
-        method do not match the run it records (the file is left unchanged).
+        method do not match the run it records: another space, method name, or (unless
+        ``force``) method settings (the file is left unchanged).
     ConfigError
         The stored configuration does not rebuild the recorded run (another model than
         ``model``, a parameter that differs from ``params``, a size out of range, a model that
@@ -221,6 +238,7 @@ def resume(
                     acc.set_first_state(first)
                 acc.absorb(data["ts"], {k: data[k] for k in names[2:]})
             _check_model(p, meta, problem, first, force)
+            _check_method(p, meta, method, force)
             _check_series(o, problem)
             if ended:  # nothing to continue: the recorded run, the file untouched
                 return _recorded(problem, cp, t0, dt, n_steps, acc)
