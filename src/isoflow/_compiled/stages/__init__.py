@@ -196,12 +196,16 @@ def stage_for(method: Any) -> CompiledStage | None:
     return _STAGES.get(type(method))
 
 
-def _dense_blas_isomp(layout: Layout) -> tuple[Any, Any]:
-    """IsoMP on the BLAS layout: real planes and 3M products for large complex states, else
-    the complex tiles."""
-    if layout.record.planar:
-        return dense_planar.iterate, dense_planar.finish
-    return dense_tiles.iterate, dense_tiles.finish
+def _on_blas(
+    planar: tuple[Any, Any], tiles: tuple[Any, Any]
+) -> Callable[[Layout], tuple[Any, Any]]:
+    """A stage's ``(iterate, finish)`` on the BLAS layout: ``planar`` for complex states from
+    ``n = PLANAR_MIN_N`` (real planes, 3M products), else ``tiles``."""
+
+    def choose(layout: Layout) -> tuple[Any, Any]:
+        return planar if layout.record.planar else tiles
+
+    return choose
 
 
 def _dense_blas_rows(layout: Layout) -> int:
@@ -212,13 +216,6 @@ def _isomp_offsets(method: IsoMP, problem: Any) -> int:
     if method.initial_guess != "extrapolate":
         return 0
     return method.order_for(problem.algebra) + 1
-
-
-def _dense_blas_cayley(layout: Layout) -> tuple[Any, Any]:
-    """IsoMP with the Cayley update on the BLAS layout: IsoMP's iteration, another finish."""
-    if layout.record.planar:
-        return dense_planar.iterate, cayley.finish_planar
-    return dense_tiles.iterate, cayley.finish_tiles
 
 
 def _smm_offsets(method: SphericalMidpoint, problem: Any) -> int:
@@ -237,7 +234,10 @@ register(
         compensated=lambda method: bool(method.compensated),
         specializations={
             DenseBlas: Specialization(
-                _dense_blas_isomp,
+                _on_blas(
+                    (dense_planar.iterate, dense_planar.finish),
+                    (dense_tiles.iterate, dense_tiles.finish),
+                ),
                 _dense_blas_rows,
                 "benchmarks 3, 10, 12: the triangular product and one tile pass; complex "
                 "states from n = PLANAR_MIN_N in real planes with 3M products (benchmark 12)",
@@ -251,7 +251,7 @@ register(
     ),
 )
 #: ``IsoMP(update="cayley")``: IsoMP's stage with another finish, compiled on the BLAS layout
-#: only (its finish solves with LAPACK); elsewhere the ``"cayley_update"`` block is missing and
+#: only (its finish inverts with LAPACK); elsewhere the ``"cayley_update"`` block is missing and
 #: the run takes the NumPy path.
 _ISOMP_CAYLEY = dataclasses.replace(
     _STAGES[IsoMP],
@@ -259,7 +259,10 @@ _ISOMP_CAYLEY = dataclasses.replace(
     needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
     specializations={
         DenseBlas: Specialization(
-            _dense_blas_cayley,
+            _on_blas(
+                (dense_planar.iterate, cayley.finish_planar),
+                (dense_tiles.iterate, cayley.finish_tiles),
+            ),
             _dense_blas_rows,
             "IsoMP's iteration (benchmarks 3, 10, 12); the Cayley finish pays at small N "
             "(benchmark 22)",
@@ -287,26 +290,12 @@ register(
 )
 
 
-def _dense_blas_split(layout: Layout) -> tuple[Any, Any]:
-    """The split step on the BLAS layout: IsoMP's specialization with the half step after it."""
-    if layout.record.planar:
-        return dense_planar.iterate, split.finish_planar
-    return dense_tiles.iterate, split.finish_tiles
-
-
 def _split_applies(method: Strang, problem: Any, composed: bool) -> bool:
     """``Strang(IsoMP())`` (either update: :func:`stage_for` picks the stage of the base's);
     composed only when its step data are empty (steady forcing)."""
     if type(method.base) is not IsoMP:
         return False
     return not composed or sum(data_widths(problem)) == 0
-
-
-def _dense_blas_split_cayley(layout: Layout) -> tuple[Any, Any]:
-    """The split step with the Cayley update on the BLAS layout."""
-    if layout.record.planar:
-        return dense_planar.iterate, split.finish_cayley_planar
-    return dense_tiles.iterate, split.finish_cayley_tiles
 
 
 register(
@@ -326,7 +315,10 @@ register(
         accepts=lambda layout: layout.lanes == 1 and layout.identity,
         specializations={
             DenseBlas: Specialization(
-                _dense_blas_split,
+                _on_blas(
+                    (dense_planar.iterate, split.finish_planar),
+                    (dense_tiles.iterate, split.finish_tiles),
+                ),
                 _dense_blas_rows,
                 "IsoMP's (benchmarks 3, 10, 12); the split step's cost: benchmark 15",
             ),
@@ -366,7 +358,10 @@ _SPLIT_CAYLEY = dataclasses.replace(
     needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
     specializations={
         DenseBlas: Specialization(
-            _dense_blas_split_cayley,
+            _on_blas(
+                (dense_planar.iterate, split.finish_cayley_planar),
+                (dense_tiles.iterate, split.finish_cayley_tiles),
+            ),
             _dense_blas_rows,
             "the split step's (benchmark 15) with the Cayley finish (benchmark 22)",
         ),
