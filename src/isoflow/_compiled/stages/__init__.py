@@ -250,24 +250,35 @@ register(
         },
     ),
 )
-#: ``IsoMP(update="cayley")``: IsoMP's stage with another finish, compiled on the BLAS layout
-#: only (its finish inverts with LAPACK); elsewhere the ``"cayley_update"`` block is missing and
-#: the run takes the NumPy path.
-_ISOMP_CAYLEY = dataclasses.replace(
-    _STAGES[IsoMP],
-    name="Cayley update",
-    needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
-    specializations={
-        DenseBlas: Specialization(
-            _on_blas(
-                (dense_planar.iterate, cayley.finish_planar),
-                (dense_tiles.iterate, cayley.finish_tiles),
+
+
+def _with_cayley_finish(
+    stage: CompiledStage, name: str, finishes: tuple[Any, Any], why: str
+) -> CompiledStage:
+    """``stage`` with the Cayley update's finishes ``(planar, tiles)``, compiled on the BLAS
+    layout only (the finish inverts with LAPACK): elsewhere the ``"cayley_update"`` block is
+    missing and the run takes the NumPy path."""
+    planar, tiles = finishes
+    return dataclasses.replace(
+        stage,
+        name=name,
+        needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
+        specializations={
+            DenseBlas: Specialization(
+                _on_blas((dense_planar.iterate, planar), (dense_tiles.iterate, tiles)),
+                _dense_blas_rows,
+                why,
             ),
-            _dense_blas_rows,
-            "IsoMP's iteration (benchmarks 3, 10, 12); the Cayley finish pays at small N "
-            "(benchmark 22)",
-        ),
-    },
+        },
+    )
+
+
+#: ``IsoMP(update="cayley")``: IsoMP's stage with another finish.
+_ISOMP_CAYLEY = _with_cayley_finish(
+    _STAGES[IsoMP],
+    "Cayley update",
+    (cayley.finish_planar, cayley.finish_tiles),
+    "IsoMP's iteration (benchmarks 3, 10, 12); the Cayley finish pays at small N (benchmark 22)",
 )
 
 register(
@@ -350,20 +361,10 @@ register(
     ),
 )
 
-#: ``Strang(IsoMP(update="cayley"))``: the split stage with the Cayley finish, on the BLAS
-#: layout (elsewhere the NumPy path), as :data:`_ISOMP_CAYLEY` is IsoMP's.
-_SPLIT_CAYLEY = dataclasses.replace(
+#: ``Strang(IsoMP(update="cayley"))``: the split stage with the Cayley finish.
+_SPLIT_CAYLEY = _with_cayley_finish(
     _STAGES[Strang],
-    name="Strang split, Cayley update",
-    needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
-    specializations={
-        DenseBlas: Specialization(
-            _on_blas(
-                (dense_planar.iterate, split.finish_cayley_planar),
-                (dense_tiles.iterate, split.finish_cayley_tiles),
-            ),
-            _dense_blas_rows,
-            "the split step's (benchmark 15) with the Cayley finish (benchmark 22)",
-        ),
-    },
+    "Strang split, Cayley update",
+    (split.finish_cayley_planar, split.finish_cayley_tiles),
+    "the split step's (benchmark 15) with the Cayley finish (benchmark 22)",
 )
