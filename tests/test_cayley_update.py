@@ -119,6 +119,13 @@ def test_an_ensemble_and_a_composition_run_it() -> None:
     assert _eigenvalue_drift(alg, comp.ys) < 1e-13
 
 
+def test_the_default_solver_follows_the_update() -> None:
+    assert iso.IsoMP(update="cayley").solver == iso.FixedPoint(rtol=1e-8)
+    assert iso.IsoMP().solver == iso.FixedPoint()  # 1e-14, as before
+    given = iso.FixedPoint(rtol=1e-12, anderson=2)
+    assert iso.IsoMP(update="cayley", solver=given).solver is given
+
+
 def test_bad_input_is_refused() -> None:
     with pytest.raises(iso.ParameterError, match="update must be one of 'midpoint', 'cayley'"):
         iso.IsoMP(update="exact")  # type: ignore[arg-type]

@@ -26,6 +26,7 @@ from ..methods import (
     Strang,
 )
 from ..methods.composition import SCHEMES
+from ..methods.isomp import CAYLEY_RTOL
 from ..nonlinear import ANDERSON_MAX, FixedPoint, Newton, NonlinearSolver
 from ..problems import IsospectralProblem
 from ..splitting import data_widths
@@ -143,10 +144,10 @@ METHODS: dict[str, MethodSpec] = {
     **{name: MethodSpec(name, _plain(cls), text) for name, (cls, text) in _BASES.items()},
     "isomp-cayley": MethodSpec(
         "isomp-cayley",
-        lambda solver: IsoMP(solver=solver or FixedPoint(), update="cayley"),
+        lambda solver: IsoMP(solver=solver or FixedPoint(rtol=CAYLEY_RTOL), update="cayley"),
         "IsoMP finished by the Cayley factor: isospectral to rounding at any tolerance (default "
         "rtol 1e-8); so, u, su, sym, herm",
-        default_rtol=1e-8,
+        default_rtol=CAYLEY_RTOL,
     ),
     "rk4": MethodSpec("rk4", lambda solver: RK4(), "classical RK4 (explicit)", implicit=False),
     "stochastic-isomp": MethodSpec(
