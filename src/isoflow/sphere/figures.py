@@ -114,6 +114,16 @@ def _symmetric_limit(values: Array, vmax: float | None) -> float:
     return v if v > 0 else 1.0
 
 
+def _map_grid(lmax: int, ntheta: Any, nphi: Any, where: str) -> tuple[int, int]:
+    """The equiangular grid of a map: ``ntheta, nphi`` checked (at least 2 rings and 1
+    longitude), or by default about two points per wavelength of degree ``lmax``, at least
+    ``90 x 180``."""
+    dt, dp = default_grid_shape(lmax)
+    ntheta = max(dt, 90) if ntheta is None else check_N(ntheta, f"{where}: ntheta", minimum=2)
+    nphi = max(dp, 180) if nphi is None else check_N(nphi, f"{where}: nphi", minimum=1)
+    return ntheta, nphi
+
+
 def draw_map(
     ax: Axes,
     data: ArrayLike,
@@ -166,9 +176,7 @@ def draw_map(
         raise ShapeError(f"draw_map: give one vorticity field, got shape {c.shape}")
     vmax = _vmax(vmax, "draw_map")
     lmax = lmax_of(c.shape[-1], "draw_map")
-    dt, dp = default_grid_shape(lmax)
-    ntheta = max(dt, 90) if ntheta is None else check_N(ntheta, "draw_map: ntheta", minimum=2)
-    nphi = max(dp, 180) if nphi is None else check_N(nphi, "draw_map: nphi", minimum=1)
+    ntheta, nphi = _map_grid(lmax, ntheta, nphi, "draw_map")
     vals = synthesize(c, ntheta, nphi, geometry="CC")
     vals = np.concatenate([vals, vals[:, :1]], axis=1)  # close the longitude circle
     lim = _symmetric_limit(vals, vmax)
@@ -231,11 +239,7 @@ def draw_field_lines(
     if c.ndim != 1:
         raise ShapeError(f"draw_field_lines: give one magnetic potential, got shape {c.shape}")
     lmax = lmax_of(c.shape[-1], "draw_field_lines")
-    dt, dp = default_grid_shape(lmax)
-    ntheta = (
-        max(dt, 90) if ntheta is None else check_N(ntheta, "draw_field_lines: ntheta", minimum=2)
-    )
-    nphi = max(dp, 180) if nphi is None else check_N(nphi, "draw_field_lines: nphi", minimum=1)
+    ntheta, nphi = _map_grid(lmax, ntheta, nphi, "draw_field_lines")
     vals = synthesize(c, ntheta, nphi, geometry="CC")
     vals = np.concatenate([vals, vals[:, :1]], axis=1)  # close the longitude circle
     lon = np.linspace(0.0, 360.0, nphi + 1)
