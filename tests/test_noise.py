@@ -17,6 +17,8 @@ from scipy.special import ndtri
 
 import isoflow as iso
 from isoflow import noise
+from isoflow._compiled.dense import dense_layout
+from isoflow._compiled.stages import stage_for, stochastic_isomp
 from isoflow._errors import InvalidBError, ParameterError, ShapeError
 from isoflow.methods._base import StepDataRequest
 from isoflow.noise import TransportNoise
@@ -347,6 +349,34 @@ def test_stochastic_vortices_and_sphere_keep_their_casimirs_on_every_path() -> N
     sol = iso.solve(prob, iso.StochasticIsoMP(), Q, dt=0.05, n_steps=20, progress=False)
     assert "compiled" in sol.stats.runner
     assert float(np.max(sol.diagnostics.casimir_drift)) < 1e-13
+
+
+@pytest.mark.parametrize(
+    ("make", "kind"),
+    [
+        (lambda: iso.models.rigid_body(20, noise=0.2, noise_seed=3), "dense so(20) (BLAS)"),
+        (lambda: iso.models.euler_sphere(24, seed=1, noise=0.01, noise_seed=3), "(BLAS)"),
+        (lambda: iso.models.euler_sphere(128, seed=1, noise=0.01, noise_seed=3), "real planes"),
+    ],
+    ids=["so-tiles", "su-tiles", "su-planes"],
+)
+def test_the_blas_iterations_with_noise_take_the_numpy_paths_steps(make, kind) -> None:  # type: ignore[no-untyped-def]
+    # large dense states: the noise added to B before IsoMP's BLAS iteration (tiles, real
+    # planes with 3M products) against the NumPy path, the same steps to rounding
+    prob, W0 = make()
+    h = 0.3 / float(np.linalg.norm(prob.B(W0), 2))
+    kw = {"dt": h, "n_steps": 4, "progress": False}
+    c = iso.solve(prob, iso.StochasticIsoMP(), W0, **kw)
+    p = iso.solve(dataclasses.replace(prob, kernel=None), iso.StochasticIsoMP(), W0, **kw)
+    assert kind in c.stats.runner and "stochastic IsoMP" in c.stats.runner
+    assert p.stats.runner == "NumPy"
+    on_blas = stage_for(iso.StochasticIsoMP()).on(dense_layout(prob, 1))
+    assert on_blas is not None
+    assert on_blas.iterate in (stochastic_isomp.iterate_tiles, stochastic_isomp.iterate_planar)
+    scale = float(np.abs(W0).max())
+    assert float(np.abs(c.ys - p.ys).max()) < 1e-12 * scale
+    assert float(np.abs(c.ys[-1] - W0).max()) > 1e-3 * scale  # the steps moved the state
+    assert float(np.max(c.diagnostics.casimir_drift)) < 1e-13
 
 
 def test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps() -> None:

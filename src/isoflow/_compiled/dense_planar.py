@@ -39,7 +39,7 @@ from .dense import _TILE
 from .dense_tiles import _load_t, _store_t, close_update
 from .flat import two_sum
 
-__all__ = ["NWORK", "finish", "iterate"]
+__all__ = ["NWORK", "finish", "iterate", "iterate_from_B"]
 
 #: Scratch rows (complex) per member: ten real planes.
 NWORK = 5
@@ -180,10 +180,18 @@ def _combine(W, X, Pr, Pi, T1, T2, T3, rowoff, G, s, half, quarter):  # type: ig
 def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """One IsoMP iteration with 3M products; ``aux`` receives the planes of ``P = B X``."""
     n = lay.n
+    f(X.reshape((n, n)), work[0].reshape((n, n)), *fargs)
+    iterate_from_B(lay, W, X, G, aux, work, hp, rr)
+
+
+@numba.njit(cache=True)
+def iterate_from_B(lay, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """The iteration after ``B`` (``work[0]``, ``(n, n)`` complex) is formed: the stages that
+    change ``B`` (the stochastic midpoint's noise) share the rest."""
+    n = lay.n
     nn = n * n
     Xm = X.reshape((n, n))
     B = work[0]
-    f(Xm, B.reshape((n, n)), *fargs)
     Br, Bi = _planes(work[1], n)
     D, Bs = _planes(work[2], n)
     Xr, Xi = _planes(work[3], n)

@@ -27,7 +27,7 @@ import numpy as np
 from .dense import _TILE, remove_trace, remove_trace_compensated
 from .flat import two_sum
 
-__all__ = ["NWORK", "finish", "iterate"]
+__all__ = ["NWORK", "finish", "iterate", "iterate_from_B"]
 
 #: Scratch rows per member.
 NWORK = 3
@@ -118,6 +118,15 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[
     """One IsoMP iteration; ``aux`` receives ``P = B X`` (the bracket is formed from it when
     needed)."""
     n = lay.n
+    f(X.reshape((n, n)), work[0].reshape((n, n)), *fargs)
+    iterate_from_B(lay, W, X, G, aux, work, hp, rr)
+
+
+@numba.njit(cache=True)
+def iterate_from_B(lay, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """The iteration after ``B`` (``work[0]``, ``(n, n)``) is formed: the stages that change
+    ``B`` (the stochastic midpoint's noise) share the rest."""
+    n = lay.n
     s = lay.s
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
@@ -125,7 +134,6 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[
     Xm = X.reshape((n, n))
     Bm = work[0].reshape((n, n))
     P = aux.reshape((n, n))
-    f(Xm, Bm, *fargs)
     np.dot(Bm, Xm, P)
     # B[:, :r1] = -conj(B[:r1, :]).T (B is skew), so block row (r0, r1) of T = P B is
     # -P[r0:r1] @ conj(B[:r1]).T: both operands contiguous, the transpose is BLAS's flag

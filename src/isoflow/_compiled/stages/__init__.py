@@ -352,6 +352,14 @@ register(
             not composed and stochastic_isomp.compiled_noise(problem)
         ),
         specializations={
+            DenseBlas: Specialization(
+                _on_blas(
+                    (stochastic_isomp.iterate_planar, dense_planar.finish),
+                    (stochastic_isomp.iterate_tiles, dense_tiles.finish),
+                ),
+                _dense_blas_rows,
+                "IsoMP's iteration (benchmarks 3, 10, 12) on the field with the noise",
+            ),
             SpinChain: Specialization(
                 spin_chain.stochastic_sweeps,
                 1,

@@ -21,6 +21,11 @@ prepared once per run by :func:`noise_params` (the method's parameters ``mp``):
 A unit of ``L`` lanes interleaves its members innermost (entry ``e`` of the flat buffer belongs
 to lane ``e % L``), as :mod:`isoflow._compiled.lanes` lays them out; site noise runs on layouts
 of one member per unit.
+
+On large dense states (the BLAS layout) the noise is added to ``B`` before IsoMP's own BLAS
+iteration (:func:`iterate_tiles`, :func:`iterate_planar`: the triangular product, real planes
+with 3M products from ``n = 128``), so an iteration of the stochastic step costs what one of
+IsoMP's does.
 """
 
 from __future__ import annotations
@@ -31,10 +36,10 @@ import numba
 import numpy as np
 
 from ...noise import TransportNoise
-from .. import blocks
+from .. import blocks, dense_planar, dense_tiles
 from ..layout import Layout
 
-__all__ = ["NWORK", "add_noise", "iterate", "noise_params"]
+__all__ = ["NWORK", "add_noise", "iterate", "iterate_planar", "iterate_tiles", "noise_params"]
 
 #: Scratch rows per unit: ``B`` and ``B X B``.
 NWORK = 2
@@ -67,6 +72,26 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[n
     add_noise(lay, mp, sd, h, B)
     blocks.bracket_triple(lay, B, X, aux, T)
     blocks.stage_update(lay, W, 0.5 * h, aux, 0.25 * h * h, T, G, X, rr)
+
+
+@numba.njit(cache=True)
+def iterate_tiles(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[no-untyped-def]
+    """IsoMP's BLAS-tile iteration (:func:`isoflow._compiled.dense_tiles.iterate`) on
+    ``B~(X)``: ``aux`` receives ``P = B~ X``, as that stage's finish reads it."""
+    n = lay.n
+    f(X.reshape((n, n)), work[0].reshape((n, n)), *fargs)
+    add_noise(lay, mp, sd, h, work[0])
+    dense_tiles.iterate_from_B(lay, W, X, G, aux, work, h, rr)
+
+
+@numba.njit(cache=True)
+def iterate_planar(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[no-untyped-def]
+    """IsoMP's iteration in real planes with 3M products
+    (:func:`isoflow._compiled.dense_planar.iterate`) on ``B~(X)``."""
+    n = lay.n
+    f(X.reshape((n, n)), work[0].reshape((n, n)), *fargs)
+    add_noise(lay, mp, sd, h, work[0])
+    dense_planar.iterate_from_B(lay, W, X, G, aux, work, h, rr)
 
 
 def noise_params(
