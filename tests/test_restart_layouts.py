@@ -110,6 +110,10 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
         lambda: _euler(17),
         lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),
     ),
+    "su(17) BLAS, stochastic Cayley update": (
+        lambda: iso.models.euler_sphere(N=17, seed=1, noise=0.02, noise_seed=2),
+        lambda: iso.StochasticIsoMP(update="cayley"),
+    ),
     "so(5) NumPy, Cayley update": (
         lambda: _elementwise(iso.algebras.so(5), skew=True),
         lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),

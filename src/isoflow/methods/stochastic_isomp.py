@@ -26,14 +26,33 @@ assumes: see :func:`isoflow.noise.truncation_level`). The derivation is in
 
 Written as IsoMP on the field :math:`B(X) + \tfrac1h \sum_i \Delta\beta_i B_i(X)`, so the compiled
 stage is IsoMP's with one more term (:mod:`isoflow._compiled.stages.stochastic_isomp`).
+
+**The Cayley update** (``update="cayley"``). The step above is isospectral only to the stage's
+residual: the solver's tolerance (``1e-14``) is what keeps the Casimirs at rounding, and each
+iteration gains about one digit, from the state (the stage offsets of a noisy path are not
+smooth in time, so there is no extrapolated start). As :class:`~isoflow.IsoMP`'s option of the
+same name, the step can end instead with the Cayley factor of the accepted stage's field,
+
+.. math::
+
+    W_{k+1} = C W_k C^\dagger, \qquad
+    C = \big(I - \tfrac12 \tilde B\big)^{-1} \big(I + \tfrac12 \tilde B\big),
+
+unitary for every skew :math:`\tilde B`, so every Casimir is kept to rounding whatever the
+stage's error. When the stage is solved exactly the two updates coincide (from the step's two
+equations, :math:`W_{k+1} = (I + \tfrac12\tilde B)(I - \tfrac12\tilde B)^{-1} W_k
+(I + \tfrac12\tilde B)^{-1} (I - \tfrac12\tilde B)`). A loose tolerance then only moves the step
+by the stage's error, far below the method's own (strong order 1/2): the default tolerance is
+``1e-8`` (:data:`~isoflow.methods.isomp.CAYLEY_RTOL`), about half the iterations. The finish costs
+one inverse and two products (:func:`~isoflow.methods.isomp.cayley_increment`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,7 +64,7 @@ from ..nonlinear import FixedPoint, NonlinearSolver
 from ..problems import IsospectralProblem
 from ..splitting import has_split_part
 from ._base import Method, StepDataRequest, StepResult, check_implicit_options
-from .isomp import IsoMP
+from .isomp import CAYLEY_RTOL, UPDATES, IsoMP, cayley_increment
 
 __all__ = ["StochasticIsoMP"]
 
@@ -71,6 +90,14 @@ class StochasticIsoMP(Method):
         substeps`` (truncated at that size): a run with step ``h`` then lies on the Brownian
         path of the run with step ``h / substeps`` and the same seed, which is what a
         strong-convergence study compares (default 1: the step's own increments).
+    update : {"midpoint", "cayley"}
+        How the step ends: ``"midpoint"`` (default), :math:`W_{k+1} = W_k + [\tilde B, X]`;
+        ``"cayley"``, :math:`W_{k+1} = C W_k C^\dagger` with the Cayley factor of
+        :math:`\tilde B` (the module docstring), isospectral to rounding whatever the
+        solver's tolerance, whose default is then ``1e-8``. Dense matrix spaces only
+        (``so``, ``u``, ``su``, ``sym``, ``herm``); the method's :attr:`name` is then
+        ``"stochastic IsoMP (Cayley update)"``, so a run resumes with the update it began
+        with.
 
     Notes
     -----
@@ -87,26 +114,87 @@ class StochasticIsoMP(Method):
     True
     """
 
-    solver: NonlinearSolver = field(default_factory=FixedPoint)
+    # ``None`` is resolved by ``__post_init__`` (it depends on ``update``): always a solver after
+    solver: NonlinearSolver = None  # type: ignore[assignment]
     truncation: float | None = 2.0
     substeps: int = 1
+    update: Literal["midpoint", "cayley"] = "midpoint"
 
     order: ClassVar[int] = 1
     implicit: ClassVar[bool] = True
     symmetric: ClassVar[bool] = False
-    name: ClassVar[str] = "stochastic IsoMP"
     reads_step_data: ClassVar[bool] = True
     integrates_noise: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.update, str) or self.update not in UPDATES:
+            choices = ", ".join(map(repr, UPDATES))
+            raise ParameterError(
+                f"StochasticIsoMP: update must be one of {choices}, got {self.update!r}"
+            )
+        if self.solver is None:
+            loose = FixedPoint(rtol=CAYLEY_RTOL) if self.update == "cayley" else FixedPoint()
+            object.__setattr__(self, "solver", loose)
         check_implicit_options(self.solver, "state")
         object.__setattr__(self, "truncation", check_truncation(self.truncation))
         check_substeps(self.substeps)
 
     @property
+    def name(self) -> str:  # type: ignore[override]
+        """``"stochastic IsoMP"``, or ``"stochastic IsoMP (Cayley update)"`` with
+        ``update="cayley"``."""
+        return "stochastic IsoMP" + ("" if self.update == "midpoint" else " (Cayley update)")
+
+    @property
     def deterministic(self) -> IsoMP:
-        """IsoMP from the state with this solver (the step on the field with noise)."""
-        return IsoMP(solver=self.solver, initial_guess="state")
+        """IsoMP from the state with this solver and update (the step on the field with
+        noise)."""
+        return IsoMP(solver=self.solver, initial_guess="state", update=self.update)
+
+    def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
+        """No state before the first step; the space is checked for the update.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem to advance.
+        y0 : ndarray, shape (*batch, *shape)
+            The initial state, in the problem's space.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        object
+            ``None``.
+
+        Raises
+        ------
+        ParameterError
+            ``update="cayley"`` on a space that is not a dense matrix space (``so``, ``u``,
+            ``su``, ``sym``, ``herm``).
+        """
+        self.check_space(problem.algebra)
+        return None
+
+    def check_space(self, algebra: Algebra) -> None:
+        """Raise if the update cannot run on ``algebra`` (as
+        :meth:`isoflow.IsoMP.check_space`).
+
+        Parameters
+        ----------
+        algebra : Algebra
+            The problem's state space.
+
+        Raises
+        ------
+        ParameterError
+            ``update="cayley"`` on a space that is not a dense matrix space.
+        """
+        try:
+            self.deterministic.check_space(algebra)
+        except ParameterError as exc:
+            raise ParameterError(str(exc).replace("IsoMP(", "StochasticIsoMP(", 1)) from None
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
         """The increments ``(nsteps, members, D)`` of the request (``D`` Brownian motions,
@@ -157,11 +245,14 @@ class StochasticIsoMP(Method):
             return base.step(problem, y, h, None)
         alg = problem.algebra
         db = step_increments(self, problem, y, h, data)
-        res = base.solver.solve(
-            base.stage_problem(_without_jvp(problem, noise), y, h, _noise_term(noise, alg, db, h)),
-            y,
-        )
-        return StepResult.from_solve(alg.project(y + h * res.aux), res, None)
+        term = _noise_term(noise, alg, db, h)
+        res = base.solver.solve(base.stage_problem(_without_jvp(problem, noise), y, h, term), y)
+        if self.update == "cayley":
+            self.check_space(alg)
+            d = cayley_increment(alg, problem.evaluate_B(res.x) + term(res.x, None), y, h)
+        else:
+            d = h * res.aux
+        return StepResult.from_solve(alg.project(y + d), res, None)
 
 
 def check_substeps(substeps: Any) -> int:

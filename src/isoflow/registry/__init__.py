@@ -19,9 +19,9 @@ Spellings (one per thing, lower case with hyphens):
   ``"package.module:function"`` (a function returning ``(problem, initial_state)``, its keyword
   arguments from ``params``).
 * **methods** (:data:`METHODS`): ``isomp``, ``isomp-cayley``, ``spherical-midpoint``,
-  ``classical-midpoint``, ``stochastic-isomp``, ``stochastic-heun``, ``rk4``, ``isosyrk-1`` ..
-  ``isosyrk-3`` and the compositions ``<base>-<scheme>`` (e.g. ``isomp-suzuki-4``,
-  ``spherical-midpoint-kahan-li-8``).
+  ``classical-midpoint``, ``stochastic-isomp``, ``stochastic-isomp-cayley``, ``stochastic-heun``,
+  ``rk4``, ``isosyrk-1`` .. ``isosyrk-3`` and the compositions ``<base>-<scheme>`` (e.g.
+  ``isomp-suzuki-4``, ``spherical-midpoint-kahan-li-8``).
 * **solvers** (:data:`SOLVERS`): ``fixed-point`` (with ``anderson = m`` for Anderson mixing of
   the last ``m`` iterates, ``m`` at most :data:`ANDERSON_MAX`), ``newton``, ``newton-krylov``.
   Explicit methods (``rk4``) take none.

@@ -110,8 +110,8 @@ class MethodSpec:
         Whether the method takes a nonlinear solver (default ``True``).
     default_rtol : float or None
         The solver tolerance a configuration without ``rtol`` gets (default ``None``: the
-        solver's own; ``1e-8`` for ``isomp-cayley``, whose update keeps the spectrum whatever
-        the tolerance).
+        solver's own; ``1e-8`` for ``isomp-cayley`` and ``stochastic-isomp-cayley``, whose update
+        keeps the spectrum whatever the tolerance).
     """
 
     name: str
@@ -154,6 +154,15 @@ METHODS: dict[str, MethodSpec] = {
         "stochastic-isomp",
         _plain(StochasticIsoMP),
         "stochastic isospectral midpoint (models with noise or a temperature)",
+    ),
+    "stochastic-isomp-cayley": MethodSpec(
+        "stochastic-isomp-cayley",
+        lambda solver: StochasticIsoMP(
+            solver=solver or FixedPoint(rtol=CAYLEY_RTOL), update="cayley"
+        ),
+        "stochastic IsoMP finished by the Cayley factor: isospectral to rounding at any "
+        "tolerance (default rtol 1e-8); so, u, su, sym, herm",
+        default_rtol=CAYLEY_RTOL,
     ),
     "stochastic-heun": MethodSpec(
         "stochastic-heun",

@@ -191,6 +191,8 @@ def stage_for(method: Any) -> CompiledStage | None:
     """The compiled stage of ``method`` (an instance), or ``None``."""
     if _cayley(method):
         return _ISOMP_CAYLEY
+    if type(method) is StochasticIsoMP and method.update == "cayley":
+        return _STOCHASTIC_CAYLEY
     if type(method) is Strang and _cayley(method.base):
         return _SPLIT_CAYLEY
     return _STAGES.get(type(method))
@@ -253,19 +255,22 @@ register(
 
 
 def _with_cayley_finish(
-    stage: CompiledStage, name: str, finishes: tuple[Any, Any], why: str
-) -> CompiledStage:
-    """``stage`` with the Cayley update's finishes ``(planar, tiles)``, compiled on the BLAS
+    stage: CompiledStage, name: str, finishes: tuple[Any, Any], why: str,
+    iterates: tuple[Any, Any] = (dense_planar.iterate, dense_tiles.iterate),
+) -> CompiledStage:  # fmt: skip
+    """``stage`` with the Cayley update's finishes ``(planar, tiles)`` after the BLAS
+    iterations ``iterates`` (``(planar, tiles)``, IsoMP's by default), compiled on the BLAS
     layout only (the finish inverts with LAPACK): elsewhere the ``"cayley_update"`` block is
     missing and the run takes the NumPy path."""
     planar, tiles = finishes
+    iterate_planar, iterate_tiles = iterates
     return dataclasses.replace(
         stage,
         name=name,
         needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
         specializations={
             DenseBlas: Specialization(
-                _on_blas((dense_planar.iterate, planar), (dense_tiles.iterate, tiles)),
+                _on_blas((iterate_planar, planar), (iterate_tiles, tiles)),
                 _dense_blas_rows,
                 why,
             ),
@@ -375,4 +380,14 @@ _SPLIT_CAYLEY = _with_cayley_finish(
     "Strang split, Cayley update",
     (split.finish_cayley_planar, split.finish_cayley_tiles),
     "the split step's (benchmark 15) with the Cayley finish (benchmark 22)",
+)
+
+#: ``StochasticIsoMP(update="cayley")``: the stochastic stage with the Cayley finish (the
+#: finishes read ``B~``, the field with the noise, where IsoMP's leave ``B``).
+_STOCHASTIC_CAYLEY = _with_cayley_finish(
+    _STAGES[StochasticIsoMP],
+    "stochastic IsoMP, Cayley update",
+    (cayley.finish_planar, cayley.finish_tiles),
+    "the stochastic stage's BLAS iteration with the Cayley finish (benchmark 22)",
+    iterates=(stochastic_isomp.iterate_planar, stochastic_isomp.iterate_tiles),
 )
