@@ -283,6 +283,23 @@ def test_compiled_and_numpy_paths_take_the_same_noisy_steps_and_keep_the_casimir
     assert float(np.abs(single.ys - c.ys[:, 0]).max()) < 1e-13
 
 
+def test_the_noise_term_formed_once_a_step_is_the_numpy_paths() -> None:
+    # the rigid body's default noise on so(10): all 45 basis fields, summed once per solve
+    # into a scratch row (the stage's begin) on the lanes and on one member's dense layout
+    prob, W0 = iso.models.rigid_body(10, noise=0.3, noise_seed=2)
+    assert prob.noise.count == 45
+    Y0 = np.stack([W0 + 0.01 * k * prob.algebra.random(k) for k in range(18)])
+    kw = {"dt": 0.02, "n_steps": 20, "progress": False}
+    c = iso.solve(prob, iso.StochasticIsoMP(), Y0, **kw)
+    one = iso.solve(prob, iso.StochasticIsoMP(), Y0[0], **kw)
+    p = iso.solve(dataclasses.replace(prob, kernel=None), iso.StochasticIsoMP(), Y0, **kw)
+    assert "lanes" in c.stats.runner and "compiled" in one.stats.runner
+    assert p.stats.runner == "NumPy"
+    assert float(np.abs(c.ys - p.ys).max()) < 1e-12
+    assert float(np.abs(one.ys - p.ys[:, 0]).max()) < 1e-12
+    assert float(np.abs(c.ys[-1] - Y0).max()) > 0.05
+
+
 def test_member_ids_key_the_paths_whatever_the_ensemble_and_the_threads() -> None:
     noisy, W0 = _rigid(n=3)
     Y0 = np.stack([W0 * (1 + 0.1 * k) for k in range(4)])

@@ -281,7 +281,7 @@ def run_unit(  # type: ignore[no-untyped-def]
         for p in range(P):
             hp = gammas[p] * h
             if plan.begin:
-                begin(f, fargs, lay, mp, sd, Wcur, hp)
+                begin(f, fargs, lay, mp, sd, Wcur, work, hp)
             guess(Wcur, ring[p], head[p], nh[p], coefs, X)
             blocks.lane_sumsq(lay, Wcur, scale2)
             for q in range(L):

@@ -61,7 +61,7 @@ class DriverTypes:
         self.f = field_type(f, fargs, dtype, dtype, ndim)
         self.fargs = numba.typeof(fargs)
         head = (self.f, self.fargs, numba.typeof(lay), numba.typeof(mp), SD)
-        self.begin = types.FunctionType(types.none(*head, A1, f8))
+        self.begin = types.FunctionType(types.none(*head, A1, A2, f8))
         self.iterate = types.FunctionType(types.none(*head, A1, A1, A1, A1, A2, f8, F1))
         self.finish = types.FunctionType(types.none(*head, A1, A1, A1, A2, f8, A1, A1, B1))
         F2 = types.Array(types.float64, 2, "C")
@@ -142,5 +142,5 @@ def _split(args: tuple[Any, ...]) -> tuple[tuple[Any, ...], tuple[Any, ...], tup
 
 
 @numba.njit(cache=True)
-def no_begin(f, fargs, lay, mp, sd, W, h):  # type: ignore[no-untyped-def]
+def no_begin(f, fargs, lay, mp, sd, W, work, h):  # type: ignore[no-untyped-def]
     """The explicit part of a stage that has none (never called: ``plan.begin`` is false)."""

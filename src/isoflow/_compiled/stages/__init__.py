@@ -6,7 +6,7 @@ blocks (:mod:`isoflow._compiled.blocks`) with the interface of the one driver
 
     iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr)   # G = G(X), rr per lane
     finish(f, fargs, lay, mp, sd, W, X, aux, work, h, E, Wn, fin)  # the new state, fin per lane
-    begin(f, fargs, lay, mp, sd, W, h)                          # optional explicit part
+    begin(f, fargs, lay, mp, sd, W, work, h)                    # optional, before each solve
 
 ``f, fargs`` are the kernel's field, ``lay`` the layout record, ``mp`` the method's parameters
 (a tuple, :attr:`CompiledStage.params`), ``sd`` the unit's step data ``(L, D)`` (e.g. noise
@@ -57,11 +57,15 @@ class Specialization:
         Scratch rows per unit, or ``layout -> rows`` when they depend on the choice.
     why : str
         The benchmark that justifies it.
+    skips_begin : bool
+        The fused evaluation does without the stage's ``begin`` (it reads what ``begin``
+        prepares by itself; default ``False``).
     """
 
     choose: Callable[[Layout], tuple[Any, Any]]
     nwork: int | Callable[[Layout], int]
     why: str
+    skips_begin: bool = False
 
     def rows(self, layout: Layout) -> int:
         """Scratch rows per unit on ``layout``."""
@@ -125,7 +129,8 @@ class CompiledStage:
         reads them (arrays in the layout's units), for a run whose substeps have the lengths
         ``steps`` (one, unless composed).
     begin : numba dispatcher or None
-        An explicit part before each solve (a split step), or none.
+        An explicit part before each solve (a split step's half flow, the stochastic step's
+        noise term in a scratch row), or none.
     step_data : callable or None
         ``(method, problem, request) -> (nsteps, members, D)`` float array: what the stage
         reads per step and member (``sd`` of the interface, e.g. noise increments; row ``i``
@@ -168,7 +173,8 @@ class CompiledStage:
         spec = self.specializations.get(type(layout.record))
         if spec is not None:
             it, fin = spec.choose(layout)
-            return StageOnLayout(self.begin, it, fin, spec.rows(layout))
+            begin = None if spec.skips_begin else self.begin
+            return StageOnLayout(begin, it, fin, spec.rows(layout))
         if not self.needs <= layout.blocks:
             return None
         return StageOnLayout(self.begin, self.iterate, self.finish, self.nwork)
@@ -257,11 +263,12 @@ register(
 def _with_cayley_finish(
     stage: CompiledStage, name: str, finishes: tuple[Any, Any], why: str,
     iterates: tuple[Any, Any] = (dense_planar.iterate, dense_tiles.iterate),
+    rows: Callable[[Layout], int] = _dense_blas_rows,
 ) -> CompiledStage:  # fmt: skip
     """``stage`` with the Cayley update's finishes ``(planar, tiles)`` after the BLAS
-    iterations ``iterates`` (``(planar, tiles)``, IsoMP's by default), compiled on the BLAS
-    layout only (the finish inverts with LAPACK): elsewhere the ``"cayley_update"`` block is
-    missing and the run takes the NumPy path."""
+    iterations ``iterates`` (``(planar, tiles)``, IsoMP's by default, with ``rows`` scratch
+    rows), compiled on the BLAS layout only (the finish inverts with LAPACK): elsewhere the
+    ``"cayley_update"`` block is missing and the run takes the NumPy path."""
     planar, tiles = finishes
     iterate_planar, iterate_tiles = iterates
     return dataclasses.replace(
@@ -271,7 +278,7 @@ def _with_cayley_finish(
         specializations={
             DenseBlas: Specialization(
                 _on_blas((iterate_planar, planar), (iterate_tiles, tiles)),
-                _dense_blas_rows,
+                rows,
                 why,
             ),
         },
@@ -343,6 +350,11 @@ register(
 )
 
 
+def _stochastic_blas_rows(layout: Layout) -> int:
+    """IsoMP's BLAS rows and the noise term's (the last)."""
+    return _dense_blas_rows(layout) + 1
+
+
 register(
     StochasticIsoMP,
     CompiledStage(
@@ -352,6 +364,7 @@ register(
         frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
         stochastic_isomp.NWORK,
         params=stochastic_isomp.noise_params,
+        begin=stochastic_isomp.begin,
         step_data=_method_step_data,
         applies=lambda method, problem, composed: (
             not composed and stochastic_isomp.compiled_noise(problem)
@@ -362,13 +375,14 @@ register(
                     (stochastic_isomp.iterate_planar, dense_planar.finish),
                     (stochastic_isomp.iterate_tiles, dense_tiles.finish),
                 ),
-                _dense_blas_rows,
+                _stochastic_blas_rows,
                 "IsoMP's iteration (benchmarks 3, 10, 12) on the field with the noise",
             ),
             SpinChain: Specialization(
                 spin_chain.stochastic_sweeps,
                 1,
                 "benchmark 18: IsoMP's fused sweep with the noise read in it",
+                skips_begin=True,
             ),
         },
     ),
@@ -390,4 +404,5 @@ _STOCHASTIC_CAYLEY = _with_cayley_finish(
     (cayley.finish_planar, cayley.finish_tiles),
     "the stochastic stage's BLAS iteration with the Cayley finish (benchmark 22)",
     iterates=(stochastic_isomp.iterate_planar, stochastic_isomp.iterate_tiles),
+    rows=_stochastic_blas_rows,
 )

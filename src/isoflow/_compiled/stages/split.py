@@ -243,7 +243,7 @@ def _half_step(mp, sd, W, h, half):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def begin(f, fargs, lay, mp, sd, W, h):  # type: ignore[no-untyped-def]
+def begin(f, fargs, lay, mp, sd, W, work, h):  # type: ignore[no-untyped-def]
     """The first half step, before the solve."""
     _half_step(mp, sd, W, h, 0)
 

@@ -10,8 +10,10 @@ One fixed-point iteration for the stage ``X`` of a step of size ``h`` with the s
     G(X) = \Pi\big(W + \tfrac h2 [\tilde B, X] + \tfrac{h^2}{4} \tilde B X \tilde B\big),
 
 and :math:`W_{k+1} = \Pi_V(W + h [\tilde B, X])`: IsoMP's blocks on every layout, with one
-generic term in between (:func:`add_noise`) that reads the noise in the unit's own layout,
-prepared once per run by :func:`noise_params` (the method's parameters ``mp``):
+generic term in between. The fields are constant, so :func:`begin` forms the step's noise term
+once per solve (:func:`add_noise`, in the unit's own layout, into the last scratch row) and
+each iteration adds that row to ``B``. The noise is prepared once per run by
+:func:`noise_params` (the method's parameters ``mp``):
 
 * ``fields`` ``(m, S)``: the constant fields :math:`\Xi_i` mapped by the layout as a state
   (into a kernel's frame, the spin chain's ``(3, N)`` layout, every lane of a unit);
@@ -39,10 +41,18 @@ from ...noise import TransportNoise
 from .. import blocks, dense_planar, dense_tiles
 from ..layout import Layout
 
-__all__ = ["NWORK", "add_noise", "iterate", "iterate_planar", "iterate_tiles", "noise_params"]
+__all__ = [
+    "NWORK",
+    "add_noise",
+    "begin",
+    "iterate",
+    "iterate_planar",
+    "iterate_tiles",
+    "noise_params",
+]
 
-#: Scratch rows per unit: ``B`` and ``B X B``.
-NWORK = 2
+#: Scratch rows per unit: ``B``, ``B X B`` and the step's noise term (the last row).
+NWORK = 3
 
 
 @numba.njit(cache=True, inline="always")
@@ -64,12 +74,31 @@ def add_noise(lay, mp, sd, h, B):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
+def begin(f, fargs, lay, mp, sd, W, work, h):  # type: ignore[no-untyped-def]
+    r"""The step's noise term :math:`\tfrac1h (\sum_i \Delta\beta_i \Xi_i + \dots)` into the
+    last scratch row, once per solve: the fields are constant, so an iteration adds one row
+    instead of summing ``m`` fields (the rigid body's so(10) has 45)."""
+    N = work[work.shape[0] - 1]
+    for e in range(N.shape[0]):
+        N[e] = 0.0
+    add_noise(lay, mp, sd, h, N)
+
+
+@numba.njit(cache=True, inline="always")
+def _add_term(work, B):  # type: ignore[no-untyped-def]
+    """``B += `` the noise term :func:`begin` left in the last scratch row."""
+    N = work[work.shape[0] - 1]
+    for e in range(B.shape[0]):
+        B[e] += N[e]
+
+
+@numba.njit(cache=True)
 def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[no-untyped-def]
     """``G = G(X)`` with the step's noise; ``aux = [B~(X), X]``; ``rr`` per lane."""
     B = work[0]
     T = work[1]
     blocks.evaluate_B(lay, f, fargs, X, B)
-    add_noise(lay, mp, sd, h, B)
+    _add_term(work, B)
     blocks.bracket_triple(lay, B, X, aux, T)
     blocks.stage_update(lay, W, 0.5 * h, aux, 0.25 * h * h, T, G, X, rr)
 
@@ -80,7 +109,7 @@ def iterate_tiles(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ig
     ``B~(X)``: ``aux`` receives ``P = B~ X``, as that stage's finish reads it."""
     n = lay.n
     f(X.reshape((n, n)), work[0].reshape((n, n)), *fargs)
-    add_noise(lay, mp, sd, h, work[0])
+    _add_term(work, work[0])
     dense_tiles.iterate_from_B(lay, W, X, G, aux, work, h, rr)
 
 
@@ -90,7 +119,7 @@ def iterate_planar(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: i
     (:func:`isoflow._compiled.dense_planar.iterate`) on ``B~(X)``."""
     n = lay.n
     f(X.reshape((n, n)), work[0].reshape((n, n)), *fargs)
-    add_noise(lay, mp, sd, h, work[0])
+    _add_term(work, work[0])
     dense_planar.iterate_from_B(lay, W, X, G, aux, work, h, rr)
 
 
