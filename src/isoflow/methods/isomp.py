@@ -99,12 +99,14 @@ __all__ = [
     "IsoMP",
     "cayley_increment",
     "cayley_space",
+    "check_update_space",
     "compensated_update",
     "default_extrapolation_order",
     "extrapolation_weights",
     "pack_state",
     "resolve_extrapolation_order",
     "state_parts",
+    "update_solver",
 ]
 
 Array = NDArray[Any]
@@ -184,12 +186,7 @@ class IsoMP(Method):
     symmetric: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        if not isinstance(self.update, str) or self.update not in UPDATES:
-            choices = ", ".join(map(repr, UPDATES))
-            raise ParameterError(f"IsoMP: update must be one of {choices}, got {self.update!r}")
-        if self.solver is None:
-            loose = FixedPoint(rtol=CAYLEY_RTOL) if self.update == "cayley" else FixedPoint()
-            object.__setattr__(self, "solver", loose)
+        object.__setattr__(self, "solver", update_solver("IsoMP", self.update, self.solver))
         check_implicit_options(
             self.solver, self.initial_guess, self.extrapolation_order, default_order=True
         )
@@ -214,11 +211,7 @@ class IsoMP(Method):
             ``update="cayley"`` on a space that is not a dense matrix space with a skew
             normalizer (``so``, ``u``, ``su``, ``sym``, ``herm``).
         """
-        if self.update == "cayley" and not cayley_space(algebra):
-            raise ParameterError(
-                f"IsoMP(update='cayley') needs a dense matrix space (so, u, su, sym, herm), "
-                f"not {algebra.name}: use the midpoint update there"
-            )
+        check_update_space("IsoMP", self.update, algebra)
 
     def stage_problem(
         self, problem: IsospectralProblem, W: Array, h: float,
@@ -411,6 +404,60 @@ UPDATES = ("midpoint", "cayley")
 #: tolerance: the method's own error dominates the stage's by orders of magnitude there
 #: (benchmark 22: the energy error equals the tight run's to 3e-7 of itself).
 CAYLEY_RTOL = 1e-8
+
+
+def update_solver(owner: str, update: Any, solver: NonlinearSolver | None) -> NonlinearSolver:
+    """``solver``, or the default of the update when it is ``None`` (``FixedPoint()``, or
+    ``FixedPoint(rtol=CAYLEY_RTOL)`` for ``"cayley"``), after checking ``update``.
+
+    Parameters
+    ----------
+    owner : str
+        The method's class name, for the message.
+    update : object
+        The method's ``update``, one of :data:`UPDATES`.
+    solver : NonlinearSolver or None
+        The solver given.
+
+    Returns
+    -------
+    NonlinearSolver
+
+    Raises
+    ------
+    ParameterError
+        ``update`` is not one of :data:`UPDATES`.
+    """
+    if not isinstance(update, str) or update not in UPDATES:
+        choices = ", ".join(map(repr, UPDATES))
+        raise ParameterError(f"{owner}: update must be one of {choices}, got {update!r}")
+    if solver is not None:
+        return solver
+    return FixedPoint(rtol=CAYLEY_RTOL) if update == "cayley" else FixedPoint()
+
+
+def check_update_space(owner: str, update: str, algebra: Algebra) -> None:
+    """Raise if ``update`` cannot run on ``algebra`` (the Cayley update on a space outside
+    :func:`cayley_space`).
+
+    Parameters
+    ----------
+    owner : str
+        The method's class name, for the message.
+    update : str
+        The method's ``update``.
+    algebra : Algebra
+        The problem's state space.
+
+    Raises
+    ------
+    ParameterError
+    """
+    if update == "cayley" and not cayley_space(algebra):
+        raise ParameterError(
+            f"{owner}(update='cayley') needs a dense matrix space (so, u, su, sym, herm), "
+            f"not {algebra.name}: use the midpoint update there"
+        )
 
 
 def cayley_space(algebra: Algebra) -> bool:

@@ -60,11 +60,11 @@ from numpy.typing import NDArray
 from .._errors import ParameterError
 from ..algebras import Algebra
 from ..noise import TRANSPORT_STREAM, TransportNoise, brownian_increments, check_truncation
-from ..nonlinear import FixedPoint, NonlinearSolver
+from ..nonlinear import NonlinearSolver
 from ..problems import IsospectralProblem
 from ..splitting import has_split_part
 from ._base import Method, StepDataRequest, StepResult, check_implicit_options
-from .isomp import CAYLEY_RTOL, UPDATES, IsoMP, cayley_increment
+from .isomp import IsoMP, cayley_increment, check_update_space, update_solver
 
 __all__ = ["StochasticIsoMP"]
 
@@ -127,14 +127,8 @@ class StochasticIsoMP(Method):
     integrates_noise: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        if not isinstance(self.update, str) or self.update not in UPDATES:
-            choices = ", ".join(map(repr, UPDATES))
-            raise ParameterError(
-                f"StochasticIsoMP: update must be one of {choices}, got {self.update!r}"
-            )
-        if self.solver is None:
-            loose = FixedPoint(rtol=CAYLEY_RTOL) if self.update == "cayley" else FixedPoint()
-            object.__setattr__(self, "solver", loose)
+        solver = update_solver("StochasticIsoMP", self.update, self.solver)
+        object.__setattr__(self, "solver", solver)
         check_implicit_options(self.solver, "state")
         object.__setattr__(self, "truncation", check_truncation(self.truncation))
         check_substeps(self.substeps)
@@ -191,10 +185,7 @@ class StochasticIsoMP(Method):
         ParameterError
             ``update="cayley"`` on a space that is not a dense matrix space.
         """
-        try:
-            self.deterministic.check_space(algebra)
-        except ParameterError as exc:
-            raise ParameterError(str(exc).replace("IsoMP(", "StochasticIsoMP(", 1)) from None
+        check_update_space("StochasticIsoMP", self.update, algebra)
 
     def step_data(self, problem: IsospectralProblem, request: StepDataRequest) -> Array:
         """The increments ``(nsteps, members, D)`` of the request (``D`` Brownian motions,
