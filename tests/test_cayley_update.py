@@ -130,7 +130,7 @@ def test_bad_input_is_refused() -> None:
     with pytest.raises(iso.ParameterError, match="update must be one of 'midpoint', 'cayley'"):
         iso.IsoMP(update="exact")  # type: ignore[arg-type]
     for prob, y0 in (
-        iso.models.heisenberg_chain(8, initial="random", seed=0),  # particles
+        iso.models.hyperbolic_vortices(1),  # (R^3, x_L)^N particles
         (iso.IsospectralProblem(B=lambda W: W @ W, algebra=iso.algebras.gl(3)),
          iso.algebras.gl(3).random(0, scale=0.3)),
     ):  # fmt: skip
@@ -176,3 +176,43 @@ def test_the_named_method_defaults_to_a_loose_tolerance() -> None:
     assert normalize_config(cfg | {"method": "isomp"})["rtol"] is None  # the solver's 1e-14
     _prob, _y0, method, _kw = build(cfg)
     assert method.name == "IsoMP (Cayley update)" and method.solver.rtol == 1e-8
+
+
+def _spins() -> dict[str, Any]:
+    return {
+        "spin chain (fused)": iso.models.heisenberg_chain(200, initial="random", seed=1),
+        "spin lattice (R^3, x)^N": iso.models.spin_lattice((10, 10), seed=2),
+        "vortices on the sphere": iso.models.sphere_vortices(
+            np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [0.6, 0, 0.8]]),
+            [1.0, 2.0, -0.5, 0.7],
+        ),
+    }
+
+
+@pytest.mark.parametrize("name", list(_spins()))
+def test_particles_keep_every_length_whatever_the_tolerance(name: str) -> None:
+    """On (R^3, x)^N the Cayley factor is a rotation per particle: at ``rtol = 1e-6`` every
+    ``|w_i|`` stays to 1e-14 over 200 steps while the midpoint update moves them by more than
+    1e-10; at ``rtol = 1e-14`` it is the midpoint update to 1e-12; the compiled finish (the
+    chain's fused sweeps, the particle blocks, the vortex layout) is the NumPy one."""
+    prob, y0 = _spins()[name]
+    kw = dict(dt=0.05, n_steps=200, progress=False)
+    lengths = np.linalg.norm(y0, axis=-1)
+
+    def drift(ys: np.ndarray) -> float:
+        return float(np.max(np.abs(np.linalg.norm(ys, axis=-1) - lengths)))
+
+    loose = iso.FixedPoint(rtol=1e-6)
+    mid = iso.solve(prob, iso.IsoMP(solver=loose), y0, **kw)
+    cay = iso.solve(prob, cayley(1e-6), y0, **kw)
+    assert "compiled" in cay.stats.runner and "Cayley update" in cay.stats.runner
+    assert drift(mid.ys) > 1e-10
+    assert drift(cay.ys) < 1e-14
+    short = dict(kw, n_steps=40)
+    tight = iso.solve(prob, cayley(1e-14), y0, **short)
+    plain = iso.solve(prob, iso.IsoMP(), y0, **short)
+    assert np.max(np.abs(tight.ys - plain.ys)) <= 1e-12
+    numpy_path = iso.solve(dataclasses.replace(prob, kernel=None), cayley(1e-8), y0, **short)
+    fast = iso.solve(prob, cayley(1e-8), y0, **short)
+    assert numpy_path.stats.runner == "NumPy"
+    assert np.max(np.abs(fast.ys - numpy_path.ys)) <= 1e-12

@@ -114,6 +114,11 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
         lambda: iso.models.euler_sphere(N=17, seed=1, noise=0.02, noise_seed=2),
         lambda: iso.StochasticIsoMP(update="cayley"),
     ),
+    "spin chain (fused), Cayley update": (_chain, lambda: iso.IsoMP(update="cayley")),
+    "(R^3,x)^N thermal particles, stochastic Cayley update": (
+        lambda: iso.models.spin_lattice((3, 3), seed=2, temperature=0.4, damping=0.1, noise_seed=5),
+        lambda: iso.StochasticIsoMP(update="cayley"),
+    ),
     "so(5) NumPy, Cayley update": (
         lambda: _elementwise(iso.algebras.so(5), skew=True),
         lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),

@@ -130,12 +130,12 @@ def test_the_default_solver_and_the_name_follow_the_update(tmp_path: Path) -> No
 def test_bad_input_is_refused() -> None:
     with pytest.raises(iso.ParameterError, match="update must be one of 'midpoint', 'cayley'"):
         iso.StochasticIsoMP(update="exact")  # type: ignore[arg-type]
-    prob, w0 = iso.models.heisenberg_chain(8, initial="random", seed=0, temperature=0.1,
-                                            damping=0.1, noise_seed=1)  # fmt: skip
+    prob, W0 = iso.models.rigid_body(4, noise=0.2, noise_seed=1)
+    gl = iso.IsospectralProblem(B=lambda W: W @ W, algebra=iso.algebras.gl(4), noise=prob.noise)
     with pytest.raises(
         iso.ParameterError, match=r"^StochasticIsoMP\(update='cayley'\) needs a dense matrix"
     ):
-        iso.solve(prob, cayley(), w0, dt=0.01, n_steps=2, progress=False)
+        iso.solve(gl, cayley(), 0.1 * W0, dt=0.01, n_steps=2, progress=False)
 
 
 def test_the_named_method_defaults_to_a_loose_tolerance() -> None:
@@ -149,3 +149,39 @@ def test_the_named_method_defaults_to_a_loose_tolerance() -> None:
     assert normalize_config(cfg | {"rtol": 1e-12})["rtol"] == 1e-12
     _prob, _y0, method, _kw = build(cfg)
     assert method.name == "stochastic IsoMP (Cayley update)" and method.solver.rtol == 1e-8
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: iso.models.heisenberg_chain(
+            100, initial="random", seed=1, temperature=0.5, damping=0.1, noise_seed=2
+        ),
+        lambda: iso.models.spin_lattice((8, 8), seed=2, temperature=0.5, damping=0.1, noise_seed=3),
+    ],
+    ids=["thermal chain (fused)", "thermal lattice (R^3, x)^N"],
+)
+def test_thermal_spins_keep_every_length_whatever_the_tolerance(make: Any) -> None:
+    """Spins at finite temperature (stochastic LLG): with the Cayley update every ``|S_i|``
+    stays to 1e-14 at ``rtol = 1e-6`` (the midpoint update: more than 1e-10 off), the
+    midpoint's paths at ``rtol = 1e-14``, and the compiled finish is the NumPy one."""
+    prob, y0 = make()
+    kw = dict(dt=0.05, n_steps=100, progress=False)
+    lengths = np.linalg.norm(y0, axis=-1)
+
+    def drift(ys: np.ndarray) -> float:
+        return float(np.max(np.abs(np.linalg.norm(ys, axis=-1) - lengths)))
+
+    mid = iso.solve(prob, iso.StochasticIsoMP(solver=iso.FixedPoint(rtol=1e-6)), y0, **kw)
+    cay = iso.solve(prob, cayley(1e-6), y0, **kw)
+    assert "compiled" in cay.stats.runner and "Cayley update" in cay.stats.runner
+    assert drift(mid.ys) > 1e-10
+    assert drift(cay.ys) < 1e-14
+    short = dict(kw, n_steps=30)
+    tight = iso.solve(prob, cayley(1e-14), y0, **short)
+    plain = iso.solve(prob, iso.StochasticIsoMP(), y0, **short)
+    assert np.max(np.abs(tight.ys - plain.ys)) <= 1e-12
+    numpy_path = iso.solve(dataclasses.replace(prob, kernel=None), cayley(), y0, **short)
+    fast = iso.solve(prob, cayley(), y0, **short)
+    assert numpy_path.stats.runner == "NumPy"
+    assert np.max(np.abs(fast.ys - numpy_path.ys)) <= 1e-12

@@ -32,6 +32,12 @@ The blocks (a layout provides those its stages need; the stage registry checks t
     finite. With a compensation ``E`` (a buffer of the state's size; size 0: none) the sum is
     compensated, :math:`W_n + E' = W + (hC + E)` exactly up to the rounding of ``hC + E``
     (:func:`isoflow._compiled.flat.two_sum`), and ``E`` is overwritten by ``E'``.
+``cayley_increment(lay, B, W, h, D)``
+    :math:`D = C W C^\dagger - W` with the Cayley factor
+    :math:`C = (I - \tfrac h2 B)^{-1}(I + \tfrac h2 B)` (the Cayley update of
+    :class:`isoflow.IsoMP`); per particle on :math:`(\mathbb{R}^3,\times)^N`, the rotation
+    :math:`d_i = \tfrac{2}{1 + |u|^2}\,(u \times w_i + u \times (u \times w_i))`,
+    :math:`u = \tfrac h2 b_i` (:func:`isoflow._compiled.particles.so3_cayley`).
 ``spherical_point(lay, W, M, mid)``
     The spherical midpoint's point ``m_i = sqrt(|w_i| |2 M_i - w_i|) M_i / |M_i|`` per
     particle (particle layouts on :math:`(\mathbb{R}^3, \times)` only).
@@ -169,6 +175,12 @@ def stage_update(lay: Any, W: Any, a: Any, C: Any, b: Any, T: Any, G: Any, X: An
 def stage_update1(lay: Any, W: Any, a: Any, C: Any, G: Any, X: Any, rr: Any) -> None:
     """``G = Pi(W + a C)``, ``rr[q] = |G - X|^2``."""
     raise _stub("stage_update1")
+
+
+@_block
+def cayley_increment(lay: Any, B: Any, W: Any, h: Any, D: Any) -> None:
+    """``D = C W C^H - W`` with the Cayley factor of ``h/2 B``."""
+    raise _stub("cayley_increment")
 
 
 @_block

@@ -1,4 +1,6 @@
-r"""IsoMP's Cayley update on :class:`~isoflow._compiled.dense.DenseBlas` states.
+r"""IsoMP's Cayley update on :class:`~isoflow._compiled.dense.DenseBlas` states, and on the
+layouts that provide the ``cayley_increment`` block (:func:`finish_blocks`: particles on
+:math:`(\mathbb{R}^3,\times)^N`, where the factor is a rotation per particle).
 
 The finish of ``IsoMP(update="cayley")`` (:mod:`isoflow.methods.isomp`, "The Cayley update"):
 with ``A = I - h/2 B`` for the ``B`` of the accepted stage, left in the scratch rows by the last
@@ -30,11 +32,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from . import blocks
 from .dense_planar import _planes
 from .dense_tiles import close_update
 from .flat import two_sum
 
-__all__ = ["finish_planar", "finish_tiles"]
+__all__ = ["finish_blocks", "finish_planar", "finish_tiles"]
 
 
 @numba.njit(cache=True)
@@ -91,3 +94,14 @@ def finish_planar(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # ty
         for j in range(n):
             B[i, j] = complex(Br[i, j], Bi[i, j])
     _cayley_update(lay, B, W, hp, E, Wn, fin)
+
+
+@numba.njit(cache=True)
+def finish_blocks(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """The Cayley update after a generic iteration (``B`` of the accepted stage in
+    ``work[0]``, ``work[1]`` spent): the increment by the layout's ``cayley_increment`` block
+    into ``work[1]``, added by its ``advance_state`` with step 1 (compensated as the midpoint
+    finish is)."""
+    D = work[1]
+    blocks.cayley_increment(lay, work[0], W, hp, D)
+    blocks.advance_state(lay, W, 1.0, D, E, Wn, fin)

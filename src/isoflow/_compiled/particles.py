@@ -41,6 +41,7 @@ __all__ = [
     "ParticlesL",
     "particle_layout",
     "sl2_forms",
+    "so3_cayley",
     "so3_forms",
     "spherical_factor",
 ]
@@ -66,6 +67,22 @@ def so3_forms(b0, b1, b2, x0, x1, x2):  # type: ignore[no-untyped-def]
         b1 * x2 - b2 * x1, b2 * x0 - b0 * x2, b0 * x1 - b1 * x0,
         d * b0, d * b1, d * b2,
     )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def so3_cayley(b0, b1, b2, w0, w1, w2, half):  # type: ignore[no-untyped-def]
+    r"""The Cayley rotation's increment :math:`C w - w` on :math:`(\mathbb{R}^3,\times)`,
+    :math:`C = (I - \hat u)^{-1}(I + \hat u)` with :math:`u = \tfrac h2 b` (``half`` is
+    :math:`\tfrac h2`): :math:`\tfrac{2}{1 + |u|^2}\,(u \times w + u \times (u \times w))`,
+    without the cancellation of ``C w - w``. ``C`` is a rotation, so ``|w|`` is kept."""
+    u0, u1, u2 = half * b0, half * b1, half * b2
+    c0, c1, c2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+    k = 2.0 / (1.0 + (u0 * u0 + u1 * u1 + u2 * u2))
+    return (
+        k * (c0 + (u1 * c2 - u2 * c1)),
+        k * (c1 + (u2 * c0 - u0 * c2)),
+        k * (c2 + (u0 * c1 - u1 * c0)),
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -148,6 +165,18 @@ def sl2_bracket(lay, B, X, C):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
+def so3_cayley_increment(lay, B, W, h, D):  # type: ignore[no-untyped-def]
+    """``D_i`` the Cayley rotation's increment of every particle (:func:`so3_cayley`)."""
+    half = 0.5 * h
+    for i in range(lay.N):
+        j = 3 * i
+        d0, d1, d2 = so3_cayley(B[j], B[j + 1], B[j + 2], W[j], W[j + 1], W[j + 2], half)
+        D[j] = d0
+        D[j + 1] = d1
+        D[j + 2] = d2
+
+
+@numba.njit(cache=True, inline="always")
 def flat_stage_update(lay, W, a, C, b, T, G, X, rr):  # type: ignore[no-untyped-def]
     """``G = W + a C + b T`` (no projection: every real array is in the space)."""
     acc = 0.0
@@ -208,6 +237,7 @@ def provide_particle_blocks(so3: tuple[type, ...], sl2: tuple[type, ...]) -> Non
         blocks.provide(blocks.bracket_triple, cls)(so3_bracket_triple)
         blocks.provide(blocks.bracket, cls)(so3_bracket)
         blocks.provide(blocks.spherical_point, cls)(so3_spherical_point)
+        blocks.provide(blocks.cayley_increment, cls)(so3_cayley_increment)
     for cls in sl2:
         blocks.provide(blocks.bracket_triple, cls)(sl2_bracket_triple)
         blocks.provide(blocks.bracket, cls)(sl2_bracket)

@@ -41,6 +41,7 @@ from .particles import (
     flat_advance_state,
     flat_stage_update,
     flat_stage_update1,
+    so3_cayley,
     so3_forms,
     spherical_factor,
 )
@@ -50,8 +51,11 @@ __all__ = [
     "SpinChain",
     "chain_layout",
     "finish_iso",
+    "finish_iso_cayley",
     "finish_smm",
     "finish_sto",
+    "finish_sto_cayley",
+    "isomp_cayley_sweeps",
     "isomp_sweeps",
     "iterate_iso_par",
     "iterate_iso_ser",
@@ -60,6 +64,7 @@ __all__ = [
     "iterate_sto_par",
     "iterate_sto_ser",
     "spherical_sweeps",
+    "stochastic_cayley_sweeps",
     "stochastic_sweeps",
 ]
 
@@ -527,7 +532,120 @@ def stochastic_sweeps(layout: Layout) -> tuple[Any, Any]:
     return (iterate_sto_par if par else iterate_sto_ser), finish_sto
 
 
+# ---- the Cayley update after the fused sweeps (``update="cayley"``) ------------------------------
+# The sweeps keep no ``B``: the finish forms ``B_i(X)`` of the accepted stage spin by spin (with
+# the step's noise for the stochastic midpoint), rotates ``W_i`` by its Cayley factor and adds
+# the increment as the midpoint finish adds its own, in one pass.
+
+
+@numba.njit(cache=True, inline="always")
+def _cayley_at(W, Wn, E, N, i, b0, b1, b2, half):  # type: ignore[no-untyped-def]
+    """``Wn_i = W_i + d_i`` with the rotation's increment ``d_i`` of ``u = half b``
+    (:func:`~isoflow._compiled.particles.so3_cayley`), compensated by ``E`` (TwoSum)."""
+    n, k = _U(N), _U(i)
+    n2 = n + n
+    d0, d1, d2 = so3_cayley(b0, b1, b2, W[k], W[n + k], W[n2 + k], half)
+    Wn[k], E[k] = two_sum(W[k], d0 + E[k])
+    Wn[n + k], E[n + k] = two_sum(W[n + k], d1 + E[n + k])
+    Wn[n2 + k], E[n2 + k] = two_sum(W[n2 + k], d2 + E[n2 + k])
+
+
+@numba.njit(cache=True, inline="always")
+def _cayley_plain_at(W, Wn, N, i, b0, b1, b2, half):  # type: ignore[no-untyped-def]
+    """:func:`_cayley_at` without compensation."""
+    n, k = _U(N), _U(i)
+    n2 = n + n
+    d0, d1, d2 = so3_cayley(b0, b1, b2, W[k], W[n + k], W[n2 + k], half)
+    Wn[k] = W[k] + d0
+    Wn[n + k] = W[n + k] + d1
+    Wn[n2 + k] = W[n2 + k] + d2
+
+
+@numba.njit(cache=True, inline="always")
+def _cayley_one(X, W, Wn, E, N, i, im, ip, c, half, noise):  # type: ignore[no-untyped-def]
+    """Spin ``i`` of the Cayley finish; ``noise`` its term of ``B~`` (zeros without noise)."""
+    b0, b1, b2 = _b(X, N, c, im, ip)
+    n0, n1, n2 = noise
+    if E.shape[0] != 0:
+        _cayley_at(W, Wn, E, N, i, b0 + n0, b1 + n1, b2 + n2, half)
+    else:
+        _cayley_plain_at(W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, half)
+
+
+@numba.njit(cache=True, fastmath=_STATE)
+def _cayley_final(X, W, Wn, E, N, c, hp):  # type: ignore[no-untyped-def]
+    """The Cayley finish without noise: the interior in loops of their own (no wrapped
+    neighbours, no branch), which vectorize, as :func:`_final_compensated`."""
+    half = 0.5 * hp
+    zero = (0.0, 0.0, 0.0)
+    _cayley_one(X, W, Wn, E, N, 0, N - 1, 1 % N, c, half, zero)
+    if E.shape[0] != 0:
+        for i in range(1, N - 1):
+            b0, b1, b2 = _b(X, N, c, i - 1, i + 1)
+            _cayley_at(W, Wn, E, N, i, b0, b1, b2, half)
+    else:
+        for i in range(1, N - 1):
+            b0, b1, b2 = _b(X, N, c, i - 1, i + 1)
+            _cayley_plain_at(W, Wn, N, i, b0, b1, b2, half)
+    if N > 1:
+        _cayley_one(X, W, Wn, E, N, N - 1, N - 2, 0, c, half, zero)
+
+
+@numba.njit(cache=True, fastmath=_STATE)
+def _cayley_final_sto(X, W, Wn, E, N, c, hp, fields, amp, row):  # type: ignore[no-untyped-def]
+    """The Cayley finish with the step's noise in ``B~`` (as :func:`_final_sto` reads it)."""
+    half = 0.5 * hp
+    inv = 1.0 / hp
+    site_only = fields.shape[0] == 0 and amp.shape[0] > 0
+    for i in range(N):
+        im = i - 1 if i > 0 else N - 1
+        ip = i + 1 if i < N - 1 else 0
+        if site_only:
+            noise = _site_noise_at(amp, row, i, inv)
+        else:
+            noise = _noise_at(fields, amp, row, N, i, inv)
+        _cayley_one(X, W, Wn, E, N, i, im, ip, c, half, noise)
+
+
+@numba.njit(cache=True)
+def finish_iso_cayley(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """``Wn_i = C_i W_i`` per spin, ``C_i`` the Cayley rotation of ``h/2 B_i(X)`` of the
+    accepted ``X``."""
+    _cayley_final(X, W, Wn, E, lay.N, lay.c, hp)
+    fin[0] = math.isfinite(_size(Wn))
+
+
+@numba.njit(cache=True)
+def finish_sto_cayley(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """:func:`finish_iso_cayley` with the step's noise in ``B~`` (as :func:`finish_sto`)."""
+    fields, _, amp = mp
+    _cayley_final_sto(X, W, Wn, E, lay.N, lay.c, hp, fields, amp, sd[0])
+    fin[0] = math.isfinite(_size(Wn))
+
+
+def isomp_cayley_sweeps(layout: Layout) -> tuple[Any, Any]:
+    """IsoMP's fused sweeps with the Cayley finish."""
+    return isomp_sweeps(layout)[0], finish_iso_cayley
+
+
+def stochastic_cayley_sweeps(layout: Layout) -> tuple[Any, Any]:
+    """The stochastic midpoint's fused sweeps with the Cayley finish."""
+    return stochastic_sweeps(layout)[0], finish_sto_cayley
+
+
 # ---- the generic blocks on the (3, N) layout (component a of spin i at a * N + i) ---------------
+
+
+@numba.njit(cache=True, inline="always")
+def _cayley_increment(lay, B, W, h, D):  # type: ignore[no-untyped-def]
+    N = lay.N
+    half = 0.5 * h
+    for i in range(N):
+        d0, d1, d2 = so3_cayley(B[i], B[N + i], B[2 * N + i], W[i], W[N + i], W[2 * N + i],
+                                half)  # fmt: skip
+        D[i] = d0
+        D[N + i] = d1
+        D[2 * N + i] = d2
 
 
 @numba.njit(cache=True, inline="always")
@@ -573,6 +691,7 @@ def _spherical_point(lay, W, M, mid):  # type: ignore[no-untyped-def]
 
 
 blocks.provide(blocks.evaluate_B, SpinChain)(_evaluate_B)
+blocks.provide(blocks.cayley_increment, SpinChain)(_cayley_increment)
 blocks.provide(blocks.bracket_triple, SpinChain)(_bracket_triple)
 blocks.provide(blocks.bracket, SpinChain)(_bracket)
 blocks.provide(blocks.spherical_point, SpinChain)(_spherical_point)

@@ -94,8 +94,9 @@ class StochasticIsoMP(Method):
         How the step ends: ``"midpoint"`` (default), :math:`W_{k+1} = W_k + [\tilde B, X]`;
         ``"cayley"``, :math:`W_{k+1} = C W_k C^\dagger` with the Cayley factor of
         :math:`\tilde B` (the module docstring), isospectral to rounding whatever the
-        solver's tolerance, whose default is then ``1e-8``. Dense matrix spaces only
-        (``so``, ``u``, ``su``, ``sym``, ``herm``); the method's :attr:`name` is then
+        solver's tolerance, whose default is then ``1e-8``. Dense matrix spaces (``so``,
+        ``u``, ``su``, ``sym``, ``herm``) and :math:`(\mathbb{R}^3,\times)^N` (thermal
+        spins: every ``|S_i|`` kept by a rotation); the method's :attr:`name` is then
         ``"stochastic IsoMP (Cayley update)"``, so a run resumes with the update it began
         with.
 
@@ -165,8 +166,8 @@ class StochasticIsoMP(Method):
         Raises
         ------
         ParameterError
-            ``update="cayley"`` on a space that is not a dense matrix space (``so``, ``u``,
-            ``su``, ``sym``, ``herm``).
+            ``update="cayley"`` on a space that is neither a dense matrix space (``so``,
+            ``u``, ``su``, ``sym``, ``herm``) nor particles on ``(R^3, x)^N``.
         """
         self.check_space(problem.algebra)
         return None
@@ -183,7 +184,7 @@ class StochasticIsoMP(Method):
         Raises
         ------
         ParameterError
-            ``update="cayley"`` on a space that is not a dense matrix space.
+            ``update="cayley"`` on a space without it (:func:`~isoflow.methods.isomp.cayley_space`).
         """
         check_update_space("StochasticIsoMP", self.update, algebra)
 

@@ -264,24 +264,37 @@ def _with_cayley_finish(
     stage: CompiledStage, name: str, finishes: tuple[Any, Any], why: str,
     iterates: tuple[Any, Any] = (dense_planar.iterate, dense_tiles.iterate),
     rows: Callable[[Layout], int] = _dense_blas_rows,
+    blocks_finish: Any = None,
+    chain: Callable[[Layout], tuple[Any, Any]] | None = None,
 ) -> CompiledStage:  # fmt: skip
     """``stage`` with the Cayley update's finishes ``(planar, tiles)`` after the BLAS
     iterations ``iterates`` (``(planar, tiles)``, IsoMP's by default, with ``rows`` scratch
-    rows), compiled on the BLAS layout only (the finish inverts with LAPACK): elsewhere the
-    ``"cayley_update"`` block is missing and the run takes the NumPy path."""
+    rows) on the BLAS layout (the finish inverts with LAPACK). With ``blocks_finish``, also on
+    the layouts that provide the ``cayley_increment`` block (particles), after the stage's
+    own iteration, and with ``chain`` (``layout -> (iterate, finish)``) on the spin chain's
+    fused sweeps; elsewhere (small dense states) the run takes the NumPy path."""
     planar, tiles = finishes
     iterate_planar, iterate_tiles = iterates
+    specializations: dict[type, Specialization] = {
+        DenseBlas: Specialization(
+            _on_blas((iterate_planar, planar), (iterate_tiles, tiles)), rows, why
+        ),
+    }
+    if chain is not None:
+        specializations[SpinChain] = Specialization(
+            chain,
+            1,
+            "the chain's fused sweeps (benchmarks 4, 5, 18), the Cayley finish a step",
+            skips_begin=True,
+        )
+    needs = {"evaluate_B", "bracket_triple", "stage_update", "advance_state"}
+    needs.add("cayley_increment" if blocks_finish is not None else "(BLAS layout only)")
     return dataclasses.replace(
         stage,
         name=name,
-        needs=frozenset({"evaluate_B", "bracket_triple", "stage_update", "cayley_update"}),
-        specializations={
-            DenseBlas: Specialization(
-                _on_blas((iterate_planar, planar), (iterate_tiles, tiles)),
-                rows,
-                why,
-            ),
-        },
+        finish=blocks_finish if blocks_finish is not None else stage.finish,
+        needs=frozenset(needs),
+        specializations=specializations,
     )
 
 
@@ -291,6 +304,8 @@ _ISOMP_CAYLEY = _with_cayley_finish(
     "Cayley update",
     (cayley.finish_planar, cayley.finish_tiles),
     "IsoMP's iteration (benchmarks 3, 10, 12); the Cayley finish pays at small N (benchmark 22)",
+    blocks_finish=cayley.finish_blocks,
+    chain=spin_chain.isomp_cayley_sweeps,
 )
 
 register(
@@ -405,4 +420,6 @@ _STOCHASTIC_CAYLEY = _with_cayley_finish(
     "the stochastic stage's BLAS iteration with the Cayley finish (benchmark 22)",
     iterates=(stochastic_isomp.iterate_planar, stochastic_isomp.iterate_tiles),
     rows=_stochastic_blas_rows,
+    blocks_finish=cayley.finish_blocks,
+    chain=spin_chain.stochastic_cayley_sweeps,
 )
