@@ -41,10 +41,10 @@ def _elementwise(alg: Any, seed: int = 0) -> tuple[Any, Any]:
 @pytest.mark.parametrize(
     "make",
     [
-        lambda: iso.models.rigid_body(n=6),  # so(6), NumPy path (written-out products)
+        lambda: iso.models.rigid_body(n=6),  # so(6), compiled small dense (written out)
         lambda: iso.models.euler_sphere(N=24, seed=2),  # su(24), compiled BLAS tiles
         lambda: _elementwise(iso.algebras.herm(20)),  # Hermitian states, compiled tiles
-        lambda: iso.models.toda(6, seed=3),  # sym(6), NumPy path
+        lambda: iso.models.toda(6, seed=3),  # sym(6), compiled small dense
         lambda: iso.models.toda(20, seed=3),  # sym(20), compiled real tiles
     ],
     ids=["so(6)", "su(24)", "herm(20)", "sym(6)", "sym(20)"],
@@ -216,3 +216,36 @@ def test_particles_keep_every_length_whatever_the_tolerance(name: str) -> None:
     fast = iso.solve(prob, cayley(1e-8), y0, **short)
     assert numpy_path.stats.runner == "NumPy"
     assert np.max(np.abs(fast.ys - numpy_path.ys)) <= 1e-12
+
+
+def _ensemble_of(prob: Any, y0: Any, M: int) -> Any:
+    alg = prob.algebra
+    return np.stack([alg.project(y0 + 1e-2 * alg.random(s)) for s in range(M)])
+
+
+@pytest.mark.parametrize(
+    ("make", "members", "kind"),
+    [
+        (lambda: iso.models.rigid_body(n=6), 0, "written-out products"),
+        (lambda: iso.models.rigid_body(n=6), 20, "lanes"),
+        (lambda: iso.models.toda(6, seed=3), 0, "written-out products"),
+        (lambda: _elementwise(iso.algebras.herm(5)), 0, "written-out products"),
+        (lambda: _elementwise(iso.algebras.su(4)), 11, "lanes"),
+    ],
+    ids=["so(6)", "so(6) lanes", "sym(6)", "herm(5)", "su(4) lanes"],
+)
+def test_the_small_dense_finish_is_the_numpy_one(make: Any, members: int, kind: str) -> None:
+    """Small dense states (``n <= 16``, one member a unit or 16 as SIMD lanes): the written-out
+    inverse and products of the compiled finish give the NumPy path's batched inverse's
+    states to 1e-12, and the spectrum stays at rounding."""
+    prob, y0 = make()
+    if members:
+        y0 = _ensemble_of(prob, y0, members)
+    h = float(0.3 / np.max(np.linalg.norm(prob.B(y0), 2, axis=(-2, -1))))
+    kw = dict(dt=h, n_steps=40, progress=False)
+    fast = iso.solve(prob, cayley(1e-8), y0, **kw)
+    slow = iso.solve(dataclasses.replace(prob, kernel=None), cayley(1e-8), y0, **kw)
+    assert kind in fast.stats.runner and "Cayley update" in fast.stats.runner
+    assert slow.stats.runner == "NumPy"
+    assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12 * np.max(np.abs(y0))
+    assert _eigenvalue_drift(prob.algebra, fast.ys) < 1e-13

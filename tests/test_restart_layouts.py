@@ -119,7 +119,11 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
         lambda: iso.models.spin_lattice((3, 3), seed=2, temperature=0.4, damping=0.1, noise_seed=5),
         lambda: iso.StochasticIsoMP(update="cayley"),
     ),
-    "so(5) NumPy, Cayley update": (
+    "su(5) lanes ensemble, Cayley update": (
+        _blocked,
+        lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),
+    ),
+    "so(5) dense, Cayley update": (
         lambda: _elementwise(iso.algebras.so(5), skew=True),
         lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),
     ),

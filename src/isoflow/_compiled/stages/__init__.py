@@ -29,7 +29,13 @@ from typing import Any
 from ...methods import IsoMP, SphericalMidpoint, StochasticIsoMP, Strang
 from ...methods._base import StepDataRequest
 from ...splitting import data_widths
-from .. import cayley, dense_planar, dense_tiles, spin_chain
+from .. import (
+    cayley,
+    cayley_small,  # noqa: F401  (the small layouts' cayley_increment block)
+    dense_planar,
+    dense_tiles,
+    spin_chain,
+)
 from ..dense import DenseBlas
 from ..layout import Layout
 from ..spin_chain import SpinChain
