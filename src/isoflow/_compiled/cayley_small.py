@@ -10,13 +10,15 @@ As on the BLAS layout (:mod:`isoflow._compiled.cayley`), with ``A = I - h/2 B``:
     D = 4Z - 2Y - 2 s Y^\dagger,
 
 formed on the lower triangle and mirrored (``D[j, i] = s conj(D[i, j])``, the diagonal in
-``V``), so that the finish's ``advance_state`` adds an exact mirror. The inverse is
-Gauss–Jordan elimination with partial pivoting, written out: LAPACK through numba's
-``np.linalg.inv`` costs about a microsecond a call in allocation and dispatch, as much as a
-whole iteration of a small member (benchmark 2's so(10) members: 0.6 us a member and
-iteration), and a step would call it once a member. ``A = I - K`` with ``K`` skew is normal
-with singular values :math:`\sqrt{1 + \lambda^2} \ge 1`, so the elimination is well
-conditioned at any step.
+``V``), so that the finish's ``advance_state`` adds an exact mirror. The inverse is Gauss–Jordan
+elimination written out, on all the members of a unit at once (the lanes innermost, as every
+loop of :mod:`isoflow._compiled.lanes`): LAPACK through numba's ``np.linalg.inv`` costs about a
+microsecond a call in allocation and dispatch, as much as a whole iteration of a small member
+(benchmark 2's so(10) members: 0.6 us a member and iteration), and a step would call it once
+a member. No pivoting is needed: ``A = I - K`` with ``K`` skew has Hermitian part ``I``, and so
+has every Schur complement's Hermitian part at least ``I``, so every pivot has real part at
+least 1 (the elimination cannot break down or grow; ``tests/test_cayley_update.py`` checks the
+inverse against LAPACK's at steps with ``||h/2 B||`` up to 1e3).
 """
 
 from __future__ import annotations
@@ -28,110 +30,85 @@ from . import blocks
 from .dense import DenseSmall
 from .lanes import ElementwiseLanes
 
-__all__ = ["member_increment"]
+__all__ = ["unit_increment"]
 
 
 @numba.njit(cache=True, inline="always")
 def _invert(A, Ai):  # type: ignore[no-untyped-def]
-    """``Ai = A^{-1}`` by Gauss–Jordan elimination with partial pivoting (``A`` is spent)."""
-    n = A.shape[0]
+    """``Ai = A^{-1}`` lane by lane (``(n, n, L)``) by Gauss–Jordan elimination without
+    pivoting (the module docstring); ``A`` is spent."""
+    n, L = A.shape[0], A.shape[2]
     for i in range(n):
         for j in range(n):
-            Ai[i, j] = 1.0 if i == j else 0.0
+            for q in range(L):
+                Ai[i, j, q] = 1.0 if i == j else 0.0
+    fac = np.empty(L, dtype=A.dtype)
     for c in range(n):
-        p = c
-        for r in range(c + 1, n):
-            if abs(A[r, c]) > abs(A[p, c]):
-                p = r
-        if p != c:
-            for j in range(n):
-                t = A[c, j]
-                A[c, j] = A[p, j]
-                A[p, j] = t
-                t = Ai[c, j]
-                Ai[c, j] = Ai[p, j]
-                Ai[p, j] = t
-        inv = 1.0 / A[c, c]
+        for q in range(L):
+            fac[q] = 1.0 / A[c, c, q]
         for j in range(n):
-            A[c, j] *= inv
-            Ai[c, j] *= inv
+            for q in range(L):
+                A[c, j, q] *= fac[q]
+                Ai[c, j, q] *= fac[q]
         for r in range(n):
-            if r != c:
-                fac = A[r, c]
-                if fac != 0.0:
-                    for j in range(n):
-                        A[r, j] -= fac * A[c, j]
-                        Ai[r, j] -= fac * Ai[c, j]
+            if r == c:
+                continue
+            for q in range(L):
+                fac[q] = A[r, c, q]
+            for j in range(n):
+                for q in range(L):
+                    A[r, j, q] -= fac[q] * A[c, j, q]
+                    Ai[r, j, q] -= fac[q] * Ai[c, j, q]
 
 
 @numba.njit(cache=True)
-def member_increment(s, B, W, half, D, scratch):  # type: ignore[no-untyped-def]
-    """``D = C W C^H - W`` for one member (``(n, n)`` arrays), ``C`` the Cayley factor of
-    ``half * B``; ``D`` an exact mirror with the sign ``s`` of sigma. ``scratch``: four
-    ``(n, n)`` arrays of the state's dtype (``(4, n, n)``), reused across members."""
-    n = W.shape[0]
+def unit_increment(s, B, W, half, D, scratch):  # type: ignore[no-untyped-def]
+    """``D = C W C^H - W`` for the ``L`` members of a unit (``(n, n, L)`` views), ``C`` the
+    Cayley factor of ``half * B``; ``D`` exact mirrors with the sign ``s`` of sigma.
+    ``scratch``: ``(4, n, n, L)`` of the state's dtype."""
+    n, L = W.shape[0], W.shape[2]
     A = scratch[0]
     Ai = scratch[1]
     Y = scratch[2]
     Z = scratch[3]
     for i in range(n):
         for j in range(n):
-            A[i, j] = (1.0 if i == j else 0.0) - half * B[i, j]
+            e = 1.0 if i == j else 0.0
+            for q in range(L):
+                A[i, j, q] = e - half * B[i, j, q]
+                Y[i, j, q] = 0.0
+                Z[i, j, q] = 0.0
     _invert(A, Ai)
     for i in range(n):
-        for j in range(n):
-            Y[i, j] = 0.0
-            Z[i, j] = 0.0
-    for i in range(n):
         for k in range(n):
-            a = Ai[i, k]
             for j in range(n):
-                Y[i, j] += a * W[k, j]
+                for q in range(L):
+                    Y[i, j, q] += Ai[i, k, q] * W[k, j, q]
     for i in range(n):  # Z = A^{-1} Y^H
         for k in range(n):
-            a = Ai[i, k]
             for j in range(n):
-                Z[i, j] += a * np.conj(Y[j, k])
+                for q in range(L):
+                    Z[i, j, q] += Ai[i, k, q] * np.conj(Y[j, k, q])
     for i in range(n):
         for j in range(i + 1):
-            d = 4.0 * np.conj(Z[j, i]) - 2.0 * Y[i, j] - 2.0 * s * np.conj(Y[j, i])
-            if i == j:
-                d = 0.5 * (d + s * np.conj(d))  # the diagonal of an element of V
-            D[i, j] = d
-            if i != j:
-                D[j, i] = s * np.conj(d)
+            for q in range(L):
+                d = 4.0 * np.conj(Z[j, i, q]) - 2.0 * Y[i, j, q] - 2.0 * s * np.conj(Y[j, i, q])
+                if i == j:
+                    d = 0.5 * (d + s * np.conj(d))  # the diagonal of an element of V
+                D[i, j, q] = d
+                if i != j:
+                    D[j, i, q] = s * np.conj(d)
 
 
 @numba.njit(cache=True, inline="always")
-def _small_increment(lay, B, W, h, D):  # type: ignore[no-untyped-def]
+def _increment(lay, B, W, h, D):  # type: ignore[no-untyped-def]
+    """The block: the unit's ``L`` members (``1`` on the small dense layout) at once."""
     n = lay.n
-    scratch = np.empty((4, n, n), dtype=W.dtype)
-    member_increment(lay.s, B.reshape((n, n)), W.reshape((n, n)), 0.5 * h, D.reshape((n, n)),
-                     scratch)  # fmt: skip
+    L = blocks.lanes(lay)
+    scratch = np.empty((4, n, n, L), dtype=W.dtype)
+    shape = (n, n, L)
+    unit_increment(lay.s, B.reshape(shape), W.reshape(shape), 0.5 * h, D.reshape(shape),
+                   scratch)  # fmt: skip
 
 
-@numba.njit(cache=True, inline="always")
-def _lanes_increment(lay, B, W, h, D):  # type: ignore[no-untyped-def]
-    """Lane by lane: each member gathered from the ``(n, n, L)`` unit, its increment
-    scattered back."""
-    n, L = lay.n, lay.L
-    Bm = B.reshape((n, n, L))
-    Wm = W.reshape((n, n, L))
-    Dm = D.reshape((n, n, L))
-    Bq = np.empty((n, n), dtype=W.dtype)
-    Wq = np.empty((n, n), dtype=W.dtype)
-    Dq = np.empty((n, n), dtype=W.dtype)
-    scratch = np.empty((4, n, n), dtype=W.dtype)
-    for q in range(L):
-        for i in range(n):
-            for j in range(n):
-                Bq[i, j] = Bm[i, j, q]
-                Wq[i, j] = Wm[i, j, q]
-        member_increment(lay.s, Bq, Wq, 0.5 * h, Dq, scratch)
-        for i in range(n):
-            for j in range(n):
-                Dm[i, j, q] = Dq[i, j]
-
-
-blocks.provide(blocks.cayley_increment, DenseSmall)(_small_increment)
-blocks.provide(blocks.cayley_increment, ElementwiseLanes)(_lanes_increment)
+blocks.provide(blocks.cayley_increment, DenseSmall, ElementwiseLanes)(_increment)
