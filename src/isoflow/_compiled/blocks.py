@@ -35,7 +35,9 @@ The blocks (a layout provides those its stages need; the stage registry checks t
 ``cayley_increment(lay, B, W, h, D)``
     :math:`D = C W C^\dagger - W` with the Cayley factor
     :math:`C = (I - \tfrac h2 B)^{-1}(I + \tfrac h2 B)` (the Cayley update of
-    :class:`isoflow.IsoMP`); per particle on :math:`(\mathbb{R}^3,\times)^N`, the rotation
+    :class:`isoflow.IsoMP`): on small dense states by a written-out inverse
+    (:mod:`isoflow._compiled.cayley_small`); per particle on :math:`(\mathbb{R}^3,\times)^N`,
+    the rotation
     :math:`d_i = \tfrac{2}{1 + |u|^2}\,(u \times w_i + u \times (u \times w_i))`,
     :math:`u = \tfrac h2 b_i` (:func:`isoflow._compiled.particles.so3_cayley`).
 ``spherical_point(lay, W, M, mid)``

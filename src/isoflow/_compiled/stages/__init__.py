@@ -276,9 +276,10 @@ def _with_cayley_finish(
     """``stage`` with the Cayley update's finishes ``(planar, tiles)`` after the BLAS
     iterations ``iterates`` (``(planar, tiles)``, IsoMP's by default, with ``rows`` scratch
     rows) on the BLAS layout (the finish inverts with LAPACK). With ``blocks_finish``, also on
-    the layouts that provide the ``cayley_increment`` block (particles), after the stage's
-    own iteration, and with ``chain`` (``layout -> (iterate, finish)``) on the spin chain's
-    fused sweeps; elsewhere (small dense states) the run takes the NumPy path."""
+    the layouts that provide the ``cayley_increment`` block (small dense states and their
+    lanes, particles), after the stage's own iteration, and with ``chain`` (``layout ->
+    (iterate, finish)``) on the spin chain's fused sweeps; elsewhere the run takes the NumPy
+    path (the split step on small states)."""
     planar, tiles = finishes
     iterate_planar, iterate_tiles = iterates
     specializations: dict[type, Specialization] = {
