@@ -170,6 +170,11 @@ def test_bad_noise_on_a_problem_is_a_typed_one_line_error() -> None:
     noisy, _ = _rigid()
     with pytest.raises(ParameterError, match="IsoMP would ignore"):
         iso.solve(noisy, iso.IsoMP(), W0, dt=0.1, n_steps=1)
+    with pytest.raises(  # the stochastic method with the same update
+        ParameterError,
+        match=r"with iso.StochasticIsoMP\(update='cayley'\) \(method 'stochastic-isomp-cayley'\)",
+    ):
+        iso.solve(noisy, iso.IsoMP(update="cayley"), W0, dt=0.1, n_steps=1)
     viscous, w0 = iso.models.euler_sphere(N=6, seed=1, noise=0.05, noise_seed=1, viscosity=0.01)
     with pytest.raises(  # the split step of IsoMP would drop the noise as IsoMP does
         ParameterError,

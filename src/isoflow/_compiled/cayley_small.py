@@ -11,14 +11,15 @@ As on the BLAS layout (:mod:`isoflow._compiled.cayley`), with ``A = I - h/2 B``:
 
 formed on the lower triangle and mirrored (``D[j, i] = s conj(D[i, j])``, the diagonal in
 ``V``), so that the finish's ``advance_state`` adds an exact mirror. The inverse is Gauss–Jordan
-elimination written out, on all the members of a unit at once (the lanes innermost, as every
-loop of :mod:`isoflow._compiled.lanes`): LAPACK through numba's ``np.linalg.inv`` costs about a
+elimination with partial pivoting, written out, on all the members of a unit at once (each lane
+picks its own pivot rows; the eliminations run with the lanes innermost, as every loop of
+:mod:`isoflow._compiled.lanes`): LAPACK through numba's ``np.linalg.inv`` costs about a
 microsecond a call in allocation and dispatch, as much as a whole iteration of a small member
-(benchmark 2's so(10) members: 0.6 us a member and iteration), and a step would call it once
-a member. No pivoting is needed: ``A = I - K`` with ``K`` skew has Hermitian part ``I``, and so
-has every Schur complement's Hermitian part at least ``I``, so every pivot has real part at
-least 1 (the elimination cannot break down or grow; ``tests/test_cayley_update.py`` checks the
-inverse against LAPACK's at steps with ``||h/2 B||`` up to 1e3).
+(benchmark 2's so(10) members: 0.6 us a member and iteration), and a step would call it once a
+member. ``A = I - K`` with ``K`` skew is normal with singular values :math:`\sqrt{1 +
+\lambda^2} \ge 1`, so it is well conditioned at the steps a solve converges at
+(:math:`h\|B\|_2 \lesssim 3`); ``tests/test_cayley_update.py`` checks the increment against
+LAPACK's inverse up to :math:`\|\tfrac h2 B\|_2 = 10^3`.
 """
 
 from __future__ import annotations
@@ -35,8 +36,9 @@ __all__ = ["unit_increment"]
 
 @numba.njit(cache=True, inline="always")
 def _invert(A, Ai):  # type: ignore[no-untyped-def]
-    """``Ai = A^{-1}`` lane by lane (``(n, n, L)``) by Gauss–Jordan elimination without
-    pivoting (the module docstring); ``A`` is spent."""
+    """``Ai = A^{-1}`` lane by lane (``(n, n, L)``) by Gauss–Jordan elimination with partial
+    pivoting, each lane its own pivot rows (the eliminations run over all lanes at once);
+    ``A`` is spent."""
     n, L = A.shape[0], A.shape[2]
     for i in range(n):
         for j in range(n):
@@ -45,6 +47,18 @@ def _invert(A, Ai):  # type: ignore[no-untyped-def]
     fac = np.empty(L, dtype=A.dtype)
     for c in range(n):
         for q in range(L):
+            p = c
+            for r in range(c + 1, n):
+                if abs(A[r, c, q]) > abs(A[p, c, q]):
+                    p = r
+            if p != c:
+                for j in range(n):
+                    t = A[c, j, q]
+                    A[c, j, q] = A[p, j, q]
+                    A[p, j, q] = t
+                    t = Ai[c, j, q]
+                    Ai[c, j, q] = Ai[p, j, q]
+                    Ai[p, j, q] = t
             fac[q] = 1.0 / A[c, c, q]
         for j in range(n):
             for q in range(L):

@@ -86,7 +86,7 @@ def add_parser(sub: Any) -> None:
     run.add_argument(
         "--rtol",
         type=positive_float,
-        help="nonlinear solver tolerance (default 1e-14; 1e-8 for isomp-cayley)",
+        help="nonlinear solver tolerance (default 1e-14; 1e-8 for the *-cayley methods)",
     )
     run.add_argument(
         "--anderson",

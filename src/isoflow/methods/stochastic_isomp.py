@@ -328,12 +328,12 @@ def refuse_noise(problem: IsospectralProblem, method: Method) -> None:
     ParameterError
     """
     if problem.noise is not None and not method.integrates_noise:
-        how = (
-            "iso.Strang(iso.StochasticIsoMP())"
-            if has_split_part(problem)
-            else "iso.StochasticIsoMP()"
-        )
+        base = getattr(method, "base", method)  # a split step's
+        cayley = getattr(base, "update", "midpoint") == "cayley"
+        sto = "iso.StochasticIsoMP(update='cayley')" if cayley else "iso.StochasticIsoMP()"
+        how = f"iso.Strang({sto})" if has_split_part(problem) else sto
+        name = "stochastic-isomp-cayley" if cayley else "stochastic-isomp"
         raise ParameterError(
             f"the problem has transport noise, which {method.name} would ignore: integrate it "
-            f"with {how} (method 'stochastic-isomp')"
+            f"with {how} (method '{name}')"
         )

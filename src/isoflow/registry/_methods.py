@@ -146,7 +146,7 @@ METHODS: dict[str, MethodSpec] = {
         "isomp-cayley",
         lambda solver: IsoMP(solver=solver or FixedPoint(rtol=CAYLEY_RTOL), update="cayley"),
         "IsoMP finished by the Cayley factor: isospectral to rounding at any tolerance (default "
-        "rtol 1e-8); so, u, su, sym, herm",
+        "rtol 1e-8); so, u, su, sym, herm, (R^3, x)^N",
         default_rtol=CAYLEY_RTOL,
     ),
     "rk4": MethodSpec("rk4", lambda solver: RK4(), "classical RK4 (explicit)", implicit=False),
@@ -161,7 +161,7 @@ METHODS: dict[str, MethodSpec] = {
             solver=solver or FixedPoint(rtol=CAYLEY_RTOL), update="cayley"
         ),
         "stochastic IsoMP finished by the Cayley factor: isospectral to rounding at any "
-        "tolerance (default rtol 1e-8); so, u, su, sym, herm",
+        "tolerance (default rtol 1e-8); so, u, su, sym, herm, (R^3, x)^N",
         default_rtol=CAYLEY_RTOL,
     ),
     "stochastic-heun": MethodSpec(
