@@ -209,6 +209,27 @@ OWN_LOOP = (
     "tests/test_sweep.py::test_a_member_whose_compiled_b_raises_fails_alone",
     "tests/test_threads.py::test_a_number_of_cores_goes_to_the_pool_the_run_uses",
     "tests/test_threads.py::test_the_threads_used_are_in_the_stats_the_file_and_isoflow_info",
+    # the Cayley update on the small dense layouts and their lanes, on particles and the chain's
+    # sweeps, and the stochastic stages with it or on the BLAS layout (2026-11-27: 106 tests of
+    # these four files took 258 s cold on one process, about 80 s of the default run's time)
+    "tests/test_stochastic_cayley.py::test_every_paths_spectrum_stays_at_rounding_whatever_the_tolerance",
+    "tests/test_stochastic_cayley.py::test_at_a_tight_tolerance_it_is_the_midpoint_update",
+    "tests/test_stochastic_cayley.py::test_the_compiled_finish_is_the_numpy_one",
+    "tests/test_stochastic_cayley.py::test_each_member_of_an_ensemble_takes_its_own_path",
+    "tests/test_stochastic_cayley.py::test_the_default_solver_and_the_name_follow_the_update",
+    "tests/test_stochastic_cayley.py::test_thermal_spins_keep_every_length_whatever_the_tolerance",
+    "tests/test_stochastic_cayley.py::test_an_ensemble_of_small_members_runs_it_on_the_lanes",
+    "tests/test_cayley_update.py::test_particles_keep_every_length_whatever_the_tolerance",
+    "tests/test_cayley_update.py::test_the_small_dense_finish_is_the_numpy_one",
+    "tests/test_cayley_update.py::test_the_written_out_inverse_holds_at_any_step[so(6)]",
+    "tests/test_cayley_update.py::test_the_written_out_inverse_holds_at_any_step[u(5)]",
+    "tests/test_noise.py::test_the_noise_term_formed_once_a_step_is_the_numpy_paths",
+    "tests/test_noise.py::test_the_blas_iterations_with_noise_take_the_numpy_paths_steps",
+    "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[su(17) BLAS, stochastic Cayley update]",
+    "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[spin chain (fused), Cayley update]",
+    "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[(R^3,x)^N thermal particles, stochastic Cayley update]",
+    "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[su(5) lanes ensemble, Cayley update]",
+    "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[so(5) dense, Cayley update]",
 )
 
 #: Over a second each on a warm cache (measured, 2026-11-26; see the module).
