@@ -135,6 +135,20 @@ def initial_state(alg: Algebra, seed: int, norm: float = 0.8) -> Array:
     return W * (norm / float(alg.norm(W)))
 
 
+def eigenvalue_drift(ys: Array) -> float:
+    """Largest change of the sorted eigenvalues of the states ``ys`` (``(steps, *batch, n, n)``)
+    from the first, relative to the spectral radius (``i W`` is Hermitian on the skew spaces,
+    ``W`` itself on the others)."""
+    skew = np.allclose(np.conj(np.swapaxes(ys[0], -1, -2)), -ys[0])
+    ev = np.sort(np.linalg.eigvalsh(1j * ys if skew else ys), axis=-1)
+    return float(np.max(np.abs(ev - ev[0])) / np.max(np.abs(ev[0])))
+
+
+def length_drift(ys: Array, y0: Array) -> float:
+    """Largest change of any particle's length ``|w_i|`` over the states ``ys`` from ``y0``."""
+    return float(np.max(np.abs(np.linalg.norm(ys, axis=-1) - np.linalg.norm(y0, axis=-1))))
+
+
 def spectrum_backward_error(W0: Array, W1: Array) -> float:
     r"""Eigenvalue change of ``W1`` against ``W0``, each divided by its condition number.
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import isoflow as iso
+from helpers import eigenvalue_drift, length_drift
 from isoflow import io
 from isoflow.methods.isomp import cayley_increment
 from isoflow.reference import reference_solution
@@ -19,14 +20,6 @@ from isoflow.reference import reference_solution
 
 def cayley(rtol: float = 1e-8, **kw: Any) -> iso.IsoMP:
     return iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=rtol), **kw)
-
-
-def _eigenvalue_drift(alg: Any, ys: np.ndarray) -> float:
-    """Largest change of the sorted eigenvalues over the run, relative to the spectral radius
-    (``i W`` is Hermitian on the skew spaces, ``W`` itself on the others)."""
-    skew = np.allclose(np.conj(np.swapaxes(ys[0], -1, -2)), -ys[0])
-    ev = np.sort(np.linalg.eigvalsh(1j * ys if skew else ys), axis=-1)
-    return float(np.max(np.abs(ev - ev[0])) / np.max(np.abs(ev[0])))
 
 
 def _elementwise(alg: Any, seed: int = 0) -> tuple[Any, Any]:
@@ -58,9 +51,8 @@ def test_the_spectrum_stays_at_rounding_whatever_the_tolerance(make: Any) -> Non
     loose = iso.FixedPoint(rtol=1e-6)
     mid = iso.solve(prob, iso.IsoMP(solver=loose), y0, dt=h, n_steps=200, progress=False)
     cay = iso.solve(prob, cayley(1e-6), y0, dt=h, n_steps=200, progress=False)
-    alg = prob.algebra
-    assert _eigenvalue_drift(alg, mid.ys) > 1e-9  # what the update is for
-    assert _eigenvalue_drift(alg, cay.ys) < 1e-13
+    assert eigenvalue_drift(mid.ys) > 1e-9  # what the update is for
+    assert eigenvalue_drift(cay.ys) < 1e-13
     # the same flow (over the first steps: some of these flows are chaotic)
     assert np.max(np.abs(cay.ys[:21] - mid.ys[:21])) < 1e-4 * np.max(np.abs(y0))
 
@@ -102,7 +94,7 @@ def test_the_compiled_finish_is_the_numpy_one(N: int) -> None:
     # the same iterates; the finishes' solves round differently
     assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12 * np.max(np.abs(y0))
     assert fast.stats.iterations_mean == slow.stats.iterations_mean
-    assert _eigenvalue_drift(prob.algebra, fast.ys) < 1e-13
+    assert eigenvalue_drift(fast.ys) < 1e-13
 
 
 def test_an_ensemble_and_a_composition_run_it() -> None:
@@ -117,7 +109,7 @@ def test_an_ensemble_and_a_composition_run_it() -> None:
     comp = iso.solve(prob, iso.Composition(cayley(1e-8), "suzuki-4"), y0, dt=h, n_steps=20,
                      progress=False)  # fmt: skip
     assert "Cayley update" in comp.stats.runner
-    assert _eigenvalue_drift(alg, comp.ys) < 1e-13
+    assert eigenvalue_drift(comp.ys) < 1e-13
 
 
 def test_the_default_solver_follows_the_update() -> None:
@@ -198,17 +190,12 @@ def test_particles_keep_every_length_whatever_the_tolerance(name: str) -> None:
     chain's fused sweeps, the particle blocks, the vortex layout) is the NumPy one."""
     prob, y0 = _spins()[name]
     kw = dict(dt=0.05, n_steps=200, progress=False)
-    lengths = np.linalg.norm(y0, axis=-1)
-
-    def drift(ys: np.ndarray) -> float:
-        return float(np.max(np.abs(np.linalg.norm(ys, axis=-1) - lengths)))
-
     loose = iso.FixedPoint(rtol=1e-6)
     mid = iso.solve(prob, iso.IsoMP(solver=loose), y0, **kw)
     cay = iso.solve(prob, cayley(1e-6), y0, **kw)
     assert "compiled" in cay.stats.runner and "Cayley update" in cay.stats.runner
-    assert drift(mid.ys) > 1e-10
-    assert drift(cay.ys) < 1e-14
+    assert length_drift(mid.ys, y0) > 1e-10
+    assert length_drift(cay.ys, y0) < 1e-14
     short = dict(kw, n_steps=40)
     tight = iso.solve(prob, cayley(1e-14), y0, **short)
     plain = iso.solve(prob, iso.IsoMP(), y0, **short)
@@ -249,7 +236,7 @@ def test_the_small_dense_finish_is_the_numpy_one(make: Any, members: int, kind: 
     assert kind in fast.stats.runner and "Cayley update" in fast.stats.runner
     assert slow.stats.runner == "NumPy"
     assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12 * np.max(np.abs(y0))
-    assert _eigenvalue_drift(prob.algebra, fast.ys) < 1e-13
+    assert eigenvalue_drift(fast.ys) < 1e-13
 
 
 @pytest.mark.parametrize(

@@ -13,18 +13,12 @@ import numpy as np
 import pytest
 
 import isoflow as iso
+from helpers import eigenvalue_drift, length_drift
 from isoflow import io
 
 
 def cayley(rtol: float = 1e-8, **kw: Any) -> iso.StochasticIsoMP:
     return iso.StochasticIsoMP(update="cayley", solver=iso.FixedPoint(rtol=rtol), **kw)
-
-
-def _eigenvalue_drift(ys: np.ndarray) -> float:
-    """Largest change of the sorted eigenvalues of ``i W`` (skew states) over the run and the
-    members, relative to the spectral radius."""
-    ev = np.sort(np.linalg.eigvalsh(1j * ys), axis=-1)
-    return float(np.max(np.abs(ev - ev[0])) / np.max(np.abs(ev[0])))
 
 
 def _h(prob: Any, y0: Any) -> float:
@@ -46,8 +40,8 @@ def test_every_paths_spectrum_stays_at_rounding_whatever_the_tolerance(make: Any
     loose = iso.FixedPoint(rtol=1e-6)
     mid = iso.solve(prob, iso.StochasticIsoMP(solver=loose), y0, **kw)
     cay = iso.solve(prob, cayley(1e-6), y0, **kw)
-    assert _eigenvalue_drift(mid.ys) > 1e-9  # what the update is for
-    assert _eigenvalue_drift(cay.ys) < 1e-13
+    assert eigenvalue_drift(mid.ys) > 1e-9  # what the update is for
+    assert eigenvalue_drift(cay.ys) < 1e-13
     assert np.max(np.abs(cay.ys[-1] - y0)) > 1e-2 * np.max(np.abs(y0))  # the noise moved it
     # the same path (over the first steps: the loose midpoint run wanders off the spectrum)
     assert np.max(np.abs(cay.ys[:11] - mid.ys[:11])) < 1e-4 * np.max(np.abs(y0))
@@ -74,7 +68,7 @@ def test_the_compiled_finish_is_the_numpy_one(N: int) -> None:
     assert slow.stats.runner == "NumPy"
     assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12 * np.max(np.abs(y0))
     assert fast.stats.iterations_mean == slow.stats.iterations_mean
-    assert _eigenvalue_drift(fast.ys) < 1e-13
+    assert eigenvalue_drift(fast.ys) < 1e-13
 
 
 def test_each_member_of_an_ensemble_takes_its_own_path() -> None:
@@ -86,7 +80,7 @@ def test_each_member_of_an_ensemble_takes_its_own_path() -> None:
     one = iso.solve(prob, cayley(), y0, **kw)  # member 0's increments
     assert np.max(np.abs(ens.ys[:, 0] - one.ys)) <= 1e-13 * np.max(np.abs(y0))
     assert np.max(np.abs(ens.ys[-1, 1] - ens.ys[-1, 0])) > 1e-3 * np.max(np.abs(y0))
-    assert _eigenvalue_drift(ens.ys) < 1e-13
+    assert eigenvalue_drift(ens.ys) < 1e-13
 
 
 @pytest.mark.slow
@@ -167,16 +161,11 @@ def test_thermal_spins_keep_every_length_whatever_the_tolerance(make: Any) -> No
     midpoint's paths at ``rtol = 1e-14``, and the compiled finish is the NumPy one."""
     prob, y0 = make()
     kw = dict(dt=0.05, n_steps=100, progress=False)
-    lengths = np.linalg.norm(y0, axis=-1)
-
-    def drift(ys: np.ndarray) -> float:
-        return float(np.max(np.abs(np.linalg.norm(ys, axis=-1) - lengths)))
-
     mid = iso.solve(prob, iso.StochasticIsoMP(solver=iso.FixedPoint(rtol=1e-6)), y0, **kw)
     cay = iso.solve(prob, cayley(1e-6), y0, **kw)
     assert "compiled" in cay.stats.runner and "Cayley update" in cay.stats.runner
-    assert drift(mid.ys) > 1e-10
-    assert drift(cay.ys) < 1e-14
+    assert length_drift(mid.ys, y0) > 1e-10
+    assert length_drift(cay.ys, y0) < 1e-14
     short = dict(kw, n_steps=30)
     tight = iso.solve(prob, cayley(1e-14), y0, **short)
     plain = iso.solve(prob, iso.StochasticIsoMP(), y0, **short)
@@ -198,5 +187,5 @@ def test_an_ensemble_of_small_members_runs_it_on_the_lanes() -> None:
     assert "lanes" in fast.stats.runner and "Cayley update" in fast.stats.runner
     assert slow.stats.runner == "NumPy"
     assert np.max(np.abs(fast.ys - slow.ys)) <= 1e-12
-    assert _eigenvalue_drift(fast.ys) < 1e-13
+    assert eigenvalue_drift(fast.ys) < 1e-13
     assert np.max(np.abs(fast.ys[-1] - Y0)) > 0.01  # the noise moved them
