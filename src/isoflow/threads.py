@@ -29,7 +29,10 @@ product it takes part in (on two cores with the other one busy, the README's fir
   ``MKL_NUM_THREADS`` and ``OMP_NUM_THREADS`` for BLAS/OpenMP, ``NUMBA_NUM_THREADS`` for
   numba (which, as numba documents, is independent of ``OMP_NUM_THREADS``);
 * compiled members that call BLAS (the dense BLAS stage on an ensemble) run over numba threads
-  only with one BLAS thread.
+  only with one BLAS thread;
+* a single system with noise whose compiled loop runs on one core draws the increments of a
+  chunk's next piece on one more thread, when the plan gives numba at least two threads and
+  BLAS one (:mod:`isoflow._compiled.draws_ahead`; the states do not change).
 
 The counts a run used are in ``SolveStats.threads`` (:class:`isoflow.SolveStats`) and in its
 result file.

@@ -52,6 +52,9 @@ class Layout:
         The layout's change of variables is not exact in floating point (a frame): the state
         and the offsets are mapped to the user's layout and back at every save point, so that
         a run restarted from a saved state (a checkpoint) continues it bit for bit.
+    threaded : bool
+        A unit's sweeps run over numba threads (a long spin chain cut into chunks): the loop
+        of one unit is not serial.
     """
 
     name: str
@@ -64,6 +67,7 @@ class Layout:
     identity: bool = True
     field: tuple[Any, tuple[Any, ...]] | None = None
     restart_at_saves: bool = False
+    threaded: bool = False
 
     @property
     def blocks(self) -> frozenset[str]:

@@ -36,6 +36,7 @@ from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
 from . import driver
 from .dense import DenseBlas, dense_layout
+from .draws_ahead import draws_ahead, pieces
 from .flat import anderson, no_mixing
 from .lanes import lanes_layout
 from .layout import Layout
@@ -196,6 +197,7 @@ class CompiledRunner(Runner):
         self.parallel = self.U >= 2 and _threads() > 1 and self._threads_allowed()
         self._drive: Any = None
         self._buffers: tuple[Array, Array, Array] | None = None
+        self._step_values = 0  # values of a step's step data (all members), once drawn
 
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS (the BLAS
@@ -402,16 +404,21 @@ class CompiledRunner(Runner):
             with numba.parallel_chunksize(chunk):
                 self._drive(*head, *args)
 
-    def _args(self, units: slice, nsteps: int, k0: int, grid: SaveGrid, rows: Array) -> tuple:
+    def _args(
+        self, units: slice, nsteps: int, k0: int, grid: SaveGrid, rows: Array,
+        data: Array | None = None,
+    ) -> tuple:  # fmt: skip
         """The driver's arguments (after the functions) for the ``units`` (views of this
-        runner's arrays) and ``nsteps`` steps from step ``k0``, saved rows into ``rows``."""
+        runner's arrays) and ``nsteps`` steps from step ``k0``, saved rows into ``rows``; the
+        step data is drawn here unless it is given."""
         L = self.layout.lanes
         members = slice(
             None if units.start is None else units.start * L,
             None if units.stop is None else units.stop * L,
         )
         plan = Plan.of(self.h, nsteps, k0, grid, self.kmax, self.impl.begin is not None)
-        data = self._step_data(k0, nsteps, members)
+        if data is None:
+            data = self._step_data(k0, nsteps, members)
         return (
             self.layout.record, self.mp, self.impl.nwork, self.W[units], self.ring[units],
             self.head[units], self.nh[units], self.comp[units], self.coefs, self.gammas, plan,
@@ -456,7 +463,48 @@ class CompiledRunner(Runner):
                 f"the step data of {self.stage.name} has shape {data.shape}, not "
                 f"({nsteps}, {idx.size}, D)"
             )
+        self._step_values = data.shape[1] * data.shape[2]
         return data
+
+    def _draws_ahead(self, nsteps: int) -> bool:
+        """Whether this chunk draws its step data ahead, piece by piece
+        (:mod:`isoflow._compiled.draws_ahead`)."""
+        from ..threads import blas_threads
+
+        return draws_ahead(
+            nsteps=nsteps, values_per_step=self._step_values,
+            serial_loop=not self.parallel and not self.layout.threaded,
+            numba_threads=_threads(), blas_threads=blas_threads(),
+        )  # fmt: skip
+
+    def _call_in_pieces(self, nsteps: int, grid: SaveGrid, buf: Array) -> None:
+        """The chunk's steps in :func:`~isoflow._compiled.draws_ahead.pieces`, each piece's
+        step data drawn on another thread while the loop runs the piece before."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        everyone = slice(None)
+        sizes = pieces(nsteps)
+        k0 = self.k
+        row = 0
+        data = self._step_data(k0, sizes[0], everyone)
+        try:
+            with ThreadPoolExecutor(1, thread_name_prefix="isoflow-draws") as pool:
+                for j, n in enumerate(sizes):
+                    ahead = None
+                    if j + 1 < len(sizes):
+                        ahead = pool.submit(self._step_data, k0 + n, sizes[j + 1], everyone)
+                    r = grid.count(k0, k0 + n)
+                    self.rec[:, driver.REC_CALL_DONE] = 0.0
+                    self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
+                    k0 += n
+                    row += r
+                    if ahead is not None:
+                        data = ahead.result()
+        except Exception:
+            # no member finished the chunk: :meth:`_advance` redoes them all from its start
+            # when their field may raise (as after a raise in an undivided chunk)
+            self.rec[:, driver.REC_CALL_DONE] = 0.0
+            raise
 
     def _advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         buf = self._rows_buffer(out)
@@ -464,7 +512,10 @@ class CompiledRunner(Runner):
         before = self._arrays(everyone) if self.may_raise else None
         raised: Exception | None = None
         try:
-            self._call(self._args(everyone, nsteps, self.k, grid, buf))
+            if self._draws_ahead(nsteps):
+                self._call_in_pieces(nsteps, grid, buf)
+            else:
+                self._call(self._args(everyone, nsteps, self.k, grid, buf))
         except Exception as exc:  # the field raised (a parallel driver says SystemError)
             if before is None or self._drive is None:
                 raise

@@ -726,4 +726,5 @@ def chain_layout(problem: Any, members: int, threads: int) -> Layout | None:
         f"spin chain ((3, N) layout{', threaded sweeps' if par else ''})",
         SpinChain(N, float(kernel.coupling), nch), to_units=to_units, from_units=from_units,
         offsets_from_units=from_units, rows_from_flat=from_units, identity=False,
+        threaded=par,
     )  # fmt: skip

@@ -1,0 +1,166 @@
+"""Step data drawn ahead (:mod:`isoflow._compiled.draws_ahead`): a chunk of a single system's
+stochastic run is cut into pieces whose noise is drawn on another thread while the compiled
+loop runs the piece before. The results must not change by a bit: every case runs with the
+default thread plan (the pieces) and with ``threads=1`` (one undivided call a chunk), and the
+pieces are checked to have been taken."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import isoflow as iso
+import user_kernels as uk
+from isoflow._compiled import draws_ahead as ahead
+from isoflow._compiled import runner as compiled_runner
+from isoflow.noise import TransportNoise
+from isoflow.threads import available_cores
+
+needs_two_cores = pytest.mark.skipif(
+    available_cores() < 2, reason="the draws go ahead only with a core to spare"
+)
+
+
+def test_pieces_cover_the_chunk_with_a_short_first_piece() -> None:
+    for nsteps in range(1, 300):
+        sizes = ahead.pieces(nsteps)
+        assert sum(sizes) == nsteps and min(sizes) >= 1, nsteps
+        assert sizes[0] == max(1, nsteps // 8), nsteps
+        assert len(sizes) <= 1 + ahead.MAX_PIECES, nsteps
+        rest = sizes[1:]
+        assert all(n == rest[0] for n in rest[:-1]) and (not rest or rest[-1] <= rest[0]), nsteps
+
+
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        ({}, True),
+        ({"nsteps": 1}, False),
+        ({"values_per_step": ahead.DRAW_AHEAD_MIN_VALUES - 1}, False),
+        ({"values_per_step": 0}, False),  # before the run's first draw
+        ({"serial_loop": False}, False),  # units or sweeps over numba threads use the cores
+        ({"numba_threads": 1}, False),  # threads=1: no second thread
+        ({"blas_threads": 2}, False),  # BLAS has the other core
+    ],
+)
+def test_the_rule_for_drawing_ahead(change: dict, expected: bool) -> None:
+    base = {
+        "nsteps": 10, "values_per_step": ahead.DRAW_AHEAD_MIN_VALUES, "serial_loop": True,
+        "numba_threads": 2, "blas_threads": 1,
+    }  # fmt: skip
+    assert ahead.draws_ahead(**(base | change)) is expected
+
+
+@pytest.fixture
+def pieces_taken(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Every step data counts (the tests' states are small); the chunks cut into pieces are
+    counted."""
+    monkeypatch.setattr(ahead, "DRAW_AHEAD_MIN_VALUES", 1)
+    taken: list[int] = []
+    original = compiled_runner.CompiledRunner._call_in_pieces
+
+    def counting(self, nsteps, grid, buf):  # type: ignore[no-untyped-def]
+        taken.append(nsteps)
+        return original(self, nsteps, grid, buf)
+
+    monkeypatch.setattr(compiled_runner.CompiledRunner, "_call_in_pieces", counting)
+    return taken
+
+
+def _both(prob, method, y0, **kw):  # type: ignore[no-untyped-def]
+    return (
+        iso.solve(prob, method, y0, progress=False, **kw),
+        iso.solve(prob, method, y0, progress=False, threads=1, **kw),
+    )
+
+
+def _thermal_lattice():  # type: ignore[no-untyped-def]
+    return iso.models.spin_lattice(
+        (12, 12), J=-1.0, field=(0.0, 0.0, 0.2), initial="random", seed=0,
+        temperature=0.5, damping=0.1, noise_seed=3,
+    )  # fmt: skip
+
+
+def _thermal_chain():  # type: ignore[no-untyped-def]
+    return iso.models.heisenberg_chain(
+        64, initial="random", seed=1, temperature=0.3, damping=0.2, noise_seed=4
+    )
+
+
+def _noisy_rigid_body():  # type: ignore[no-untyped-def]
+    return iso.models.rigid_body(6, noise=0.3, noise_seed=5)
+
+
+@needs_two_cores
+@pytest.mark.parametrize("model", [_thermal_lattice, _thermal_chain, _noisy_rigid_body])
+@pytest.mark.parametrize("update", ["midpoint", "cayley"])
+def test_pieces_give_the_undivided_run_bit_for_bit(
+    pieces_taken: list[int], model, update: str
+) -> None:  # type: ignore[no-untyped-def]
+    prob, y0 = model()
+    a, b = _both(prob, iso.StochasticIsoMP(update=update), y0, dt=0.05, n_steps=90, save_every=7)
+    assert pieces_taken, "no chunk was cut into pieces"
+    assert "compiled" in a.stats.runner
+    np.testing.assert_array_equal(a.ys, b.ys)  # saved rows inside pieces included
+    np.testing.assert_array_equal(a.ts, b.ts)
+    assert a.stats.n_iterations == b.stats.n_iterations
+    assert a.stats.iterations_max == b.stats.iterations_max
+    assert a.stats.residual_max == b.stats.residual_max
+
+
+@needs_two_cores
+def test_a_member_that_fails_inside_a_piece_fails_as_in_the_undivided_run(
+    pieces_taken: list[int],
+) -> None:
+    prob, y0 = _noisy_rigid_body()
+    method = iso.StochasticIsoMP(solver=iso.FixedPoint(max_iter=12))  # step 54 needs 13
+    a, b = _both(prob, method, y0, dt=0.01, n_steps=120, throw=False)
+    assert pieces_taken
+    assert 5 < int(b.failed_step) < 120  # inside a chunk of several steps
+    assert int(a.failed_step) == int(b.failed_step)
+    assert a.failure_reasons == b.failure_reasons
+    np.testing.assert_array_equal(a.ys, b.ys)
+
+
+@needs_two_cores
+def test_a_field_that_raises_inside_a_piece_fails_as_in_the_undivided_run(
+    pieces_taken: list[int],
+) -> None:
+    alg = iso.algebras.so(5)
+    d = np.arange(1.0, 6.0)
+    C = 0.5 * (d[:, None] + d[None, :])
+    W0 = alg.random(0)
+    W0 *= 0.3 / float(np.max(np.abs(W0)))  # the largest entry is 0.3 and moves
+    field = alg.random(seed=7)
+    prob = iso.IsospectralProblem(
+        B=lambda W: C * W, algebra=alg, kernel=iso.CompiledB(uk.raises_when_large, (C, 0.31)),
+        noise=TransportNoise(fields=0.05 * field[None] / np.linalg.norm(field), seed=2),
+    )  # fmt: skip
+    a, b = _both(prob, iso.StochasticIsoMP(), W0, dt=0.1, n_steps=500, throw=False)
+    assert pieces_taken
+    k = int(b.failed_step)
+    assert 5 < k < 500
+    assert int(a.failed_step) == k
+    assert a.failure_reasons == b.failure_reasons == {(): "B raised: ValueError: entry too large"}
+    np.testing.assert_array_equal(a.ys, b.ys)
+    assert a.stats.n_iterations == b.stats.n_iterations
+
+
+@needs_two_cores
+def test_an_error_while_drawing_a_later_piece_reaches_the_caller(
+    pieces_taken: list[int], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    prob, y0 = _thermal_chain()
+    original = compiled_runner.CompiledRunner._step_data
+    calls: list[int] = []
+
+    def failing_later(self, k0, nsteps, members):  # type: ignore[no-untyped-def]
+        calls.append(k0)
+        if len(calls) > 4:  # the first chunks (1 and 4 steps), then a later piece
+            raise RuntimeError("the draws failed")
+        return original(self, k0, nsteps, members)
+
+    monkeypatch.setattr(compiled_runner.CompiledRunner, "_step_data", failing_later)
+    with pytest.raises(RuntimeError, match="the draws failed"):
+        iso.solve(prob, iso.StochasticIsoMP(), y0, dt=0.05, n_steps=90, progress=False)
+    assert pieces_taken
