@@ -17,25 +17,29 @@ the initial guess, the state instead of IsoMP's extrapolation, which costs itera
 IsoMP started from the state (``isomp_from_state_*``) separates the two. Target: ratio
 stochastic / IsoMP <= 1.3 per step. Run alone: ``python benchmarks/bench_18_stochastic.py``.
 
-**Missed** (2 cores shared with other work, load about 5, ratios timed alternately): spin chain
-4.1 (stochastic 17.3 ms a step, IsoMP 4.2 ms, IsoMP from the state 4.0 ms; 17, 14 and 17
-iterations), ensemble 3.3 (168 ms, 50 ms, 110 ms; 9.3, 3.0 and 6.5 iterations a member). Why:
+Each case runs twice: with the default update and with ``update="cayley"`` (rows marked
+"Cayley update"; stage tolerance 1e-8, every Casimir kept to rounding on every path).
 
-* the chain: drawing ``3 * 10^5`` normals takes 10.8 ms a step, 2.6 IsoMP steps by itself
-  (numpy's Philox about 7 ns a word, ``scipy.special.ndtri`` about 25 ns a normal, one
-  thread; two threads gained nothing on this machine). The stage itself, IsoMP's fused sweep
-  with the site noise read in it, costs 0.38 ms an iteration against IsoMP's 0.3 (it was
-  4.2 ms on the generic blocks before the sweep was fused). Reaching 1.3 needs cheaper
-  normals (threads on an idle machine, or a normal transform cheaper than ``ndtri``);
-* the ensemble: the stochastic step starts from the state. The stage offsets of a noisy path
-  are not smooth in time, so IsoMP's extrapolation does not apply, and the noise moves the
-  stage further from the state: 9.3 iterations against 6.5 for IsoMP from the state and 3.0
-  with its extrapolation. Per iteration the two cost the same (18 ms against 17); the
-  increments are 0.3 % of the step. A better start is not the fix (measured by
-  ``benchmarks/stochastic_starts.py``: the noise's own stage to second order, with the field,
-  plus the last step's deterministic miss, or Anderson mixing (memory 1-3: 9.3 and 8.5
-  iterations) save at most two of the ten): each iteration gains about one digit, a
-  contraction set by the step's increment, and the increments are fresh every step.
+**Missed** (idle machine, 2026-11-27 15:46 UTC, ``python benchmarks/run_all.py --only 18``):
+
+* spin chain: 2.73 (stochastic 10.3 ms a step, IsoMP 3.8 ms; 17 and 14 iterations), with the
+  Cayley update 2.74 (8.8 ms, 9 iterations). The ``3 * 10^5`` normals of a step take 6.3-7.5
+  ms timed alone (numpy's Philox about 5 ns a word, ``scipy.special.ndtri`` about 14 ns a
+  normal). A single system draws them on a second thread while its loop runs
+  (:mod:`isoflow._compiled.draws_ahead`: 4.07 before, in a run of the same day), and the step
+  now waits for the draws, most with the Cayley update, whose loop is shorter than them.
+  Reaching 1.3 needs normals cheaper than ``ndtri`` (the increments of existing runs would
+  then change: a resume must keep its path) or the draws spread over more cores;
+* the ensemble: 8.45 (43.7 ms, 5.2 ms; 9.3 and 1.0 iterations a member), with the Cayley
+  update 5.75 (30.1 ms, 5.4 iterations). IsoMP's extrapolated start leaves one iteration a
+  step; the stochastic step starts from the state. The stage offsets of a noisy path are not
+  smooth in time, so the extrapolation does not apply, and the noise moves the stage away from
+  the state. Per iteration the two cost about the same. A better start is not the fix
+  (measured by ``benchmarks/stochastic_starts.py``: the noise's own stage to second order,
+  with the field, plus the last step's deterministic miss, or Anderson mixing (memory 1-3:
+  9.3 and 8.5 iterations) save at most two of the ten): each iteration gains about one
+  digit, a contraction set by the step's increment, and the increments are fresh every step.
+  The increments are 1 % of the step.
 """
 
 from __future__ import annotations
@@ -50,13 +54,16 @@ import numpy as np
 from suite import StepTimer, benchmark, best_time, paired_best_times, record
 
 
-def _compare(prob: Any, noisy: Any, y: Any, h: float, steps: int) -> dict[str, Any]:
-    """Seconds and iterations per step of the stochastic midpoint on ``noisy`` and of IsoMP on
-    ``prob``, and the seconds per step of drawing the increments alone."""
+def _compare(
+    prob: Any, noisy: Any, y: Any, h: float, steps: int, update: str = "midpoint"
+) -> dict[str, Any]:
+    """Seconds and iterations per step of the stochastic midpoint (with ``update``) on
+    ``noisy`` and of IsoMP on ``prob``, and the seconds per step of drawing the increments
+    alone."""
     import isoflow as iso
     from isoflow.methods._base import StepDataRequest
 
-    sto = StepTimer(noisy, iso.StochasticIsoMP(), y, h)
+    sto = StepTimer(noisy, iso.StochasticIsoMP(update=update), y, h)
     det = StepTimer(prob, iso.IsoMP(), y, h)
     from_state = StepTimer(prob, iso.IsoMP(initial_guess="state"), y, h)
     sto.advance(3)  # compiled, and IsoMP's extrapolation running
@@ -92,17 +99,17 @@ def _compare(prob: Any, noisy: Any, y: Any, h: float, steps: int) -> dict[str, A
     }
 
 
-def spin_chain(N: int, steps: int) -> dict[str, Any]:
+def spin_chain(N: int, steps: int, update: str = "midpoint") -> dict[str, Any]:
     """Benchmark 18's spin chain: site noise 0.1 against none, ``h = 0.1``."""
     from bench_4_spin_chain_bandwidth import random_chain
     from isoflow.noise import TransportNoise
 
     prob, w0 = random_chain(N)
     noisy = dataclasses.replace(prob, noise=TransportNoise(site=0.1, seed=1))
-    return {"N": N} | _compare(prob, noisy, w0, 0.1, steps)
+    return {"N": N, "update": update} | _compare(prob, noisy, w0, 0.1, steps, update)
 
 
-def rigid_body_ensemble(M: int, steps: int) -> dict[str, Any]:
+def rigid_body_ensemble(M: int, steps: int, update: str = "midpoint") -> dict[str, Any]:
     """Benchmark 18's ensemble: ``M`` so(10) rigid bodies, one noise field, ``h = 0.1``."""
     import isoflow as iso
 
@@ -112,7 +119,7 @@ def rigid_body_ensemble(M: int, steps: int) -> dict[str, Any]:
     prob, _ = iso.models.rigid_body(10)
     noisy, _ = iso.models.rigid_body(10, noise=field[None], noise_seed=1)
     W = alg.random(seed=0, batch=(M,), scale=0.1)
-    return {"M": M} | _compare(prob, noisy, W, 0.1, steps)
+    return {"M": M, "update": update} | _compare(prob, noisy, W, 0.1, steps, update)
 
 
 def _record(what: str, row: dict[str, Any], threads: dict[str, int]) -> dict[str, Any]:
@@ -130,13 +137,19 @@ def run(quick: bool) -> list[dict[str, Any]]:
     N, M = (100_000, 10_000) if not quick else (20_000, 2_000)
     cores = available_cores()
     threads = {"numba": cores, "blas": 1}
-    with thread_limits(blas=1, numba=cores):
-        chain = spin_chain(N, 20 if not quick else 10)
-        ensemble = rigid_body_ensemble(M, 5 if not quick else 3)
-    return [
-        _record(f"spin chain, N = {N}, site noise: time per step", chain, threads),
-        _record(f"{M} so(10) rigid bodies, one noise field: time per step", ensemble, threads),
-    ]
+    rows = []
+    for update, how in (("midpoint", ""), ("cayley", ", Cayley update")):
+        with thread_limits(blas=1, numba=cores):
+            chain = spin_chain(N, 20 if not quick else 10, update)
+            ensemble = rigid_body_ensemble(M, 5 if not quick else 3, update)
+        rows += [
+            _record(f"spin chain, N = {N}, site noise{how}: time per step", chain, threads),
+            _record(
+                f"{M} so(10) rigid bodies, one noise field{how}: time per step", ensemble,
+                threads,
+            ),
+        ]  # fmt: skip
+    return rows
 
 
 if __name__ == "__main__":
