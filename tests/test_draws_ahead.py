@@ -6,6 +6,9 @@ pieces are checked to have been taken."""
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 
@@ -49,6 +52,67 @@ def test_the_rule_for_drawing_ahead(change: dict, expected: bool) -> None:
         "numba_threads": 2, "blas_threads": 1,
     }  # fmt: skip
     assert ahead.draws_ahead(**(base | change)) is expected
+
+
+def _numbered(k0: int, n: int) -> np.ndarray:
+    """Step data that names its steps: ``(n, 2, 3)`` filled with the step's number."""
+    return np.broadcast_to(np.arange(k0 + 1, k0 + n + 1.0)[:, None, None], (n, 2, 3)).copy()
+
+
+@pytest.mark.parametrize("helper", ["none", "before", "beside"])
+def test_step_draws_give_the_piece_in_order_whoever_draws_a_step(helper: str) -> None:
+    draws = ahead.StepDraws(_numbered, 40, 9)
+    if helper == "before":
+        draws.help()  # the helper drew every step: the caller finds none left
+    elif helper == "beside":
+        t = threading.Thread(target=draws.help)
+        t.start()
+    out = draws.result()
+    if helper == "beside":
+        t.join()
+    np.testing.assert_array_equal(out, _numbered(40, 9))
+
+
+def test_step_draws_wait_for_the_helpers_step_in_progress() -> None:
+    taken, release, caller_done = threading.Event(), threading.Event(), threading.Event()
+    caller_steps: list[int] = []
+
+    def draw(k: int, n: int) -> np.ndarray:
+        if k == 10:  # the first step: the helper's
+            taken.set()
+            assert release.wait(60)
+        else:
+            caller_steps.append(k)
+            if len(caller_steps) == 4:
+                caller_done.set()
+        return _numbered(k, n)
+
+    draws = ahead.StepDraws(draw, 10, 5)
+    helper = threading.Thread(target=draws.help)
+    helper.start()
+    assert taken.wait(60)
+    with ThreadPoolExecutor(1) as pool:
+        result = pool.submit(draws.result)
+        assert caller_done.wait(60)  # the caller drew steps 5..2 from the back
+        assert not result.done()  # and waits for step 1, which the helper holds
+        release.set()
+        np.testing.assert_array_equal(result.result(60), _numbered(10, 5))
+    helper.join()
+    assert sorted(caller_steps) == [11, 12, 13, 14]
+
+
+@pytest.mark.parametrize(("failing", "helper"), [(2, True), (5, False)])
+def test_step_draws_raise_an_error_of_either_thread(failing: int, helper: bool) -> None:
+    def draw(k: int, n: int) -> np.ndarray:
+        if k == failing:
+            raise ValueError(f"after step {k}: failed")
+        return _numbered(k, n)
+
+    draws = ahead.StepDraws(draw, 0, 7)
+    if helper:
+        draws.help()  # takes steps from the first until its third raises
+    with pytest.raises(ValueError, match=f"after step {failing}: failed"):
+        draws.result()  # without a helper: from the last step back, its second raises
 
 
 @pytest.fixture

@@ -10,8 +10,10 @@ with a core to spare the draws can run beside it.
 
 :func:`pieces` cuts such a chunk of ``n`` steps into a short first piece and at most four
 equal ones; the runner draws the first piece's data, then, while the compiled loop (which
-releases the GIL) runs piece ``j``, draws piece ``j + 1``'s on one more thread. Only the first
-piece's draws (about an eighth) stay on the critical path.
+releases the GIL) runs piece ``j``, draws piece ``j + 1``'s on one more thread; once the loop
+is done, the caller draws the steps still left, from the piece's last step back
+(:class:`StepDraws`). Only the first piece's draws (about an eighth, drawn by both threads)
+stay on the critical path.
 
 Nothing in the results changes, bit for bit: the step data of step ``k`` is a function of
 ``(seed, member, k)`` alone, and the driver's arithmetic of a step does not depend on how the
@@ -26,7 +28,16 @@ one chunk (a thread pool kept across calls would not survive a ``fork`` of the p
 
 from __future__ import annotations
 
-__all__ = ["DRAW_AHEAD_MIN_VALUES", "MAX_PIECES", "draws_ahead", "pieces"]
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["DRAW_AHEAD_MIN_VALUES", "MAX_PIECES", "StepDraws", "draws_ahead", "pieces"]
+
+Array = NDArray[Any]
 
 #: Smallest step data (values a step, all members) worth drawing on another thread: below it
 #: the draws cost less than a thread's start and the calls of more pieces.
@@ -72,3 +83,78 @@ def draws_ahead(
         and numba_threads >= 2
         and blas_threads <= 1
     )
+
+
+class StepDraws:
+    """The step data of the steps ``k0 + 1 .. k0 + n``, drawn one step at a time from both
+    ends: :meth:`help` (on the helper thread) takes steps from the first on, :meth:`result`
+    (the caller, once its loop has run the piece before) takes the rest from the last back and
+    waits for the helper's step in progress.
+
+    When the draws of a piece take longer than the loop's piece before them (a long spin chain:
+    a few memory sweeps an iteration against ``3 N`` normal quantiles a step), the caller's
+    core draws the rest instead of waiting: the two threads of the run's plan stay busy and
+    never more than two run. The data is the same whoever draws a step.
+
+    Parameters
+    ----------
+    draw : callable
+        ``draw(k0, nsteps)`` -> the step data ``(nsteps, members, D)`` of the steps ``k0 + 1
+        .. k0 + nsteps``.
+    k0, n : int
+        The steps before the first one drawn, and how many.
+    """
+
+    def __init__(self, draw: Callable[[int, int], Array], k0: int, n: int) -> None:
+        self._draw = draw
+        self._k0 = k0
+        self._n = n
+        self._lo = 0  # the next step the helper takes
+        self._hi = n  # one past the next step the caller takes
+        self._stored = 0
+        self._error: BaseException | None = None
+        self._out: Array | None = None
+        self._ready = threading.Condition()
+
+    def _take(self, front: bool) -> int | None:
+        with self._ready:
+            if self._lo >= self._hi or self._error is not None:
+                return None
+            if front:
+                self._lo += 1
+                return self._lo - 1
+            self._hi -= 1
+            return self._hi
+
+    def _draw_one(self, s: int) -> None:
+        try:
+            one = self._draw(self._k0 + s, 1)
+        except BaseException as exc:  # handed to the caller by :meth:`result`
+            with self._ready:
+                self._error = exc
+                self._stored += 1
+                self._ready.notify_all()
+            return
+        with self._ready:
+            if self._out is None:
+                self._out = np.empty((self._n, *one.shape[1:]), dtype=one.dtype)
+            self._out[s] = one[0]
+            self._stored += 1
+            self._ready.notify_all()
+
+    def help(self) -> None:
+        """Draw steps from the first on until none is left (the helper thread's part)."""
+        while (s := self._take(front=True)) is not None:
+            self._draw_one(s)
+
+    def result(self) -> Array:
+        """Draw the steps left from the last back, wait for the helper's, and return the
+        data ``(n, members, D)``; an error of either thread is raised here."""
+        while (s := self._take(front=False)) is not None:
+            self._draw_one(s)
+        with self._ready:
+            self._ready.wait_for(lambda: self._stored >= self._lo + (self._n - self._hi))
+            if self._error is not None:
+                raise self._error
+            assert self._out is not None
+            return self._out

@@ -36,7 +36,7 @@ from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
 from . import driver
 from .dense import DenseBlas, dense_layout
-from .draws_ahead import draws_ahead, pieces
+from .draws_ahead import StepDraws, draws_ahead, pieces
 from .flat import anderson, no_mixing
 from .lanes import lanes_layout
 from .layout import Layout
@@ -479,20 +479,28 @@ class CompiledRunner(Runner):
 
     def _call_in_pieces(self, nsteps: int, grid: SaveGrid, buf: Array) -> None:
         """The chunk's steps in :func:`~isoflow._compiled.draws_ahead.pieces`, each piece's
-        step data drawn on another thread while the loop runs the piece before."""
+        step data drawn on another thread while the loop runs the piece before (and by this
+        thread too once the loop is done: :class:`~isoflow._compiled.draws_ahead.StepDraws`)."""
         from concurrent.futures import ThreadPoolExecutor
 
         everyone = slice(None)
+
+        def draw(k: int, n: int) -> Array:
+            return self._step_data(k, n, everyone)
+
         sizes = pieces(nsteps)
         k0 = self.k
         row = 0
-        data = self._step_data(k0, sizes[0], everyone)
         try:
             with ThreadPoolExecutor(1, thread_name_prefix="isoflow-draws") as pool:
+                first = StepDraws(draw, k0, sizes[0])
+                pool.submit(first.help)
+                data = first.result()
                 for j, n in enumerate(sizes):
                     ahead = None
                     if j + 1 < len(sizes):
-                        ahead = pool.submit(self._step_data, k0 + n, sizes[j + 1], everyone)
+                        ahead = StepDraws(draw, k0 + n, sizes[j + 1])
+                        pool.submit(ahead.help)
                     r = grid.count(k0, k0 + n)
                     self.rec[:, driver.REC_CALL_DONE] = 0.0
                     self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
