@@ -11,11 +11,11 @@ timed alternately; time per spin-step. Target: ratio <= 1.5. Run alone:
 Two rows: the default update, and ``update="cayley"`` (stage tolerance 1e-8; every ``|S_i|``
 kept to rounding on every path; the method the noise guide points to for spins).
 
-Measured on the idle machine, 2026-11-27 15:46 UTC (``python benchmarks/run_all.py --only
-19``): **missed** with the default update, 2.22 (13.7 against 6.2 ms a step: 19 iterations
+Measured on the idle machine, 2026-11-27 15:50 UTC (``python benchmarks/run_all.py --only
+19``): **missed** with the default update, 2.13 (13.6 against 6.4 ms a step: 19 iterations
 against IsoMP's 11, the Gilbert term and the site noise read in every iteration); **met** with
-the Cayley update, 1.44 (9.0 ms, 10 iterations). The ``3 * 65536`` normals of a step (4.0 ms
-timed alone) are drawn on a second thread while the loop runs
+the Cayley update, 1.40 (8.5 against 6.0 ms, 10 iterations). The ``3 * 65536`` normals of a
+step (4.0-4.5 ms timed alone) are drawn on a second thread while the loop runs
 (:mod:`isoflow._compiled.draws_ahead`): before, the rows read 2.62 and 1.83 in a run of the
 same day.
 """
