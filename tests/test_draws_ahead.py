@@ -37,21 +37,22 @@ def test_pieces_cover_the_chunk_with_a_short_first_piece() -> None:
 @pytest.mark.parametrize(
     ("change", "expected"),
     [
-        ({}, True),
-        ({"nsteps": 1}, False),
-        ({"values_per_step": ahead.DRAW_AHEAD_MIN_VALUES - 1}, False),
-        ({"values_per_step": 0}, False),  # before the run's first draw
-        ({"serial_loop": False}, False),  # units or sweeps over numba threads use the cores
-        ({"numba_threads": 1}, False),  # threads=1: no second thread
-        ({"blas_threads": 2}, False),  # BLAS has the other core
+        ({}, "ahead"),
+        ({"serial_loop": False}, "together"),  # units or sweeps over numba threads
+        ({"nsteps": 1}, "inline"),
+        ({"values_per_step": ahead.DRAW_AHEAD_MIN_VALUES - 1}, "inline"),
+        ({"values_per_step": 0}, "inline"),  # before the run's first draw
+        ({"numba_threads": 1}, "inline"),  # threads=1: no second thread
+        ({"numba_threads": 1, "serial_loop": False}, "inline"),
+        ({"blas_threads": 2}, "inline"),  # BLAS has the other core
     ],
 )
-def test_the_rule_for_drawing_ahead(change: dict, expected: bool) -> None:
+def test_the_rule_for_drawing_ahead(change: dict, expected: str) -> None:
     base = {
         "nsteps": 10, "values_per_step": ahead.DRAW_AHEAD_MIN_VALUES, "serial_loop": True,
         "numba_threads": 2, "blas_threads": 1,
     }  # fmt: skip
-    assert ahead.draws_ahead(**(base | change)) is expected
+    assert ahead.how_to_draw(**(base | change)) == expected
 
 
 def _numbered(k0: int, n: int) -> np.ndarray:
@@ -131,6 +132,22 @@ def pieces_taken(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     return taken
 
 
+@pytest.fixture
+def drawn_together(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Every step data counts; the chunks drawn by several threads before the loop are
+    counted (the first piece of a chunk in pieces is drawn so too)."""
+    monkeypatch.setattr(ahead, "DRAW_AHEAD_MIN_VALUES", 1)
+    taken: list[int] = []
+    original = compiled_runner.CompiledRunner._drawn_together
+
+    def counting(self, pool, helpers, k0, nsteps):  # type: ignore[no-untyped-def]
+        taken.append(nsteps)
+        return original(self, pool, helpers, k0, nsteps)
+
+    monkeypatch.setattr(compiled_runner.CompiledRunner, "_drawn_together", counting)
+    return taken
+
+
 def _both(prob, method, y0, **kw):  # type: ignore[no-untyped-def]
     return (
         iso.solve(prob, method, y0, progress=False, **kw),
@@ -170,6 +187,25 @@ def test_pieces_give_the_undivided_run_bit_for_bit(
     assert a.stats.n_iterations == b.stats.n_iterations
     assert a.stats.iterations_max == b.stats.iterations_max
     assert a.stats.residual_max == b.stats.residual_max
+
+
+@needs_two_cores
+@pytest.mark.parametrize("model", [_thermal_chain, _noisy_rigid_body])
+def test_an_ensemble_drawn_together_gives_the_run_drawn_inline_bit_for_bit(
+    drawn_together: list[int], monkeypatch: pytest.MonkeyPatch, model
+) -> None:  # type: ignore[no-untyped-def]
+    calls_in_pieces: list[int] = []
+    monkeypatch.setattr(
+        compiled_runner.CompiledRunner, "_call_in_pieces",
+        lambda self, *a: calls_in_pieces.append(1),
+    )  # fmt: skip
+    prob, y0 = model()
+    ys = np.stack([y0] * 5)  # units over numba threads: the loop uses the cores
+    a, b = _both(prob, iso.StochasticIsoMP(), ys, dt=0.05, n_steps=60, save_every=7)
+    assert drawn_together and not calls_in_pieces
+    np.testing.assert_array_equal(a.ys, b.ys)
+    assert a.stats.n_iterations == b.stats.n_iterations
+    assert not np.array_equal(a.ys[-1, 0], a.ys[-1, 1])  # each member its own path
 
 
 @needs_two_cores

@@ -31,8 +31,9 @@ product it takes part in (on two cores with the other one busy, the README's fir
 * compiled members that call BLAS (the dense BLAS stage on an ensemble) run over numba threads
   only with one BLAS thread;
 * a single system with noise whose compiled loop runs on one core draws the increments of a
-  chunk's next piece on one more thread, when the plan gives numba at least two threads and
-  BLAS one (:mod:`isoflow._compiled.draws_ahead`; the states do not change).
+  chunk's next piece on the other numba threads while the loop runs, and an ensemble draws a
+  chunk's increments on all of them before its loop, when the plan gives numba at least two
+  threads and BLAS one (:mod:`isoflow._compiled.draws_ahead`; the states do not change).
 
 The counts a run used are in ``SolveStats.threads`` (:class:`isoflow.SolveStats`) and in its
 result file.

@@ -15,12 +15,17 @@ is done, the caller draws the steps still left, from the piece's last step back
 (:class:`StepDraws`). Only the first piece's draws (about an eighth, drawn by both threads)
 stay on the critical path.
 
+A loop that runs on numba threads itself (ensemble members, a long chain's sweeps) leaves no
+core to spare while it runs; its chunk's step data is drawn before it by the caller and helpers
+together, the numba threads' count of threads in all.
+
 Nothing in the results changes, bit for bit: the step data of step ``k`` is a function of
 ``(seed, member, k)`` alone, and the driver's arithmetic of a step does not depend on how the
 steps of a run are split into calls (:mod:`isoflow._compiled.driver`). The rule
-(:func:`draws_ahead`): the run's thread plan gives numba at least two threads and BLAS one
-(:mod:`isoflow.threads`; ``threads=1`` turns it off), the loop is serial (one unit, sweeps not
-cut over threads), and a step's data holds at least :data:`DRAW_AHEAD_MIN_VALUES` values. A
+(:func:`how_to_draw`): the run's thread plan gives numba at least two threads and BLAS one
+(:mod:`isoflow.threads`; ``threads=1`` turns it off), the chunk has two steps or more, and a
+step's data holds at least :data:`DRAW_AHEAD_MIN_VALUES` values; the helpers are the numba
+threads but one (the caller's). A
 field that raises in any piece makes the whole chunk count as not done, so the runner redoes
 it from its start as it does after a raise in an undivided chunk. The extra thread lives for
 one chunk (a thread pool kept across calls would not survive a ``fork`` of the process).
@@ -35,7 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["DRAW_AHEAD_MIN_VALUES", "MAX_PIECES", "StepDraws", "draws_ahead", "pieces"]
+__all__ = ["DRAW_AHEAD_MIN_VALUES", "MAX_PIECES", "StepDraws", "how_to_draw", "pieces"]
 
 Array = NDArray[Any]
 
@@ -70,19 +75,27 @@ def pieces(nsteps: int) -> list[int]:
     return out
 
 
-def draws_ahead(
+def how_to_draw(
     *, nsteps: int, values_per_step: int, serial_loop: bool, numba_threads: int,
     blas_threads: int,
-) -> bool:  # fmt: skip
-    """Whether a chunk of ``nsteps`` steps draws its step data ahead (the module docstring's
-    rule); ``values_per_step`` is ``0`` while unknown (before the run's first draw)."""
-    return (
-        nsteps >= 2
-        and values_per_step >= DRAW_AHEAD_MIN_VALUES
-        and serial_loop
-        and numba_threads >= 2
-        and blas_threads <= 1
-    )
+) -> str:  # fmt: skip
+    """How a chunk of ``nsteps`` steps draws its step data (``values_per_step`` is ``0`` while
+    unknown, before the run's first draw):
+
+    * ``"inline"``: on the caller's thread before the loop (one step, little data, no thread to
+      spare: numba has one thread or BLAS more than one);
+    * ``"ahead"``: in pieces beside a serial loop (:func:`pieces`, :class:`StepDraws`);
+    * ``"together"``: before a loop that runs on numba threads itself (members, or a chain's
+      sweeps), the caller and ``numba_threads - 1`` helpers drawing the steps at once.
+    """
+    if (
+        nsteps < 2
+        or values_per_step < DRAW_AHEAD_MIN_VALUES
+        or numba_threads < 2
+        or blas_threads > 1
+    ):
+        return "inline"
+    return "ahead" if serial_loop else "together"
 
 
 class StepDraws:

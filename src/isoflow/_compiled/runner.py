@@ -36,7 +36,7 @@ from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
 from . import driver
 from .dense import DenseBlas, dense_layout
-from .draws_ahead import StepDraws, draws_ahead, pieces
+from .draws_ahead import StepDraws, how_to_draw, pieces
 from .flat import anderson, no_mixing
 from .lanes import lanes_layout
 from .layout import Layout
@@ -466,41 +466,49 @@ class CompiledRunner(Runner):
         self._step_values = data.shape[1] * data.shape[2]
         return data
 
-    def _draws_ahead(self, nsteps: int) -> bool:
-        """Whether this chunk draws its step data ahead, piece by piece
-        (:mod:`isoflow._compiled.draws_ahead`)."""
+    def _how_to_draw(self, nsteps: int) -> str:
+        """How this chunk draws its step data (:func:`~isoflow._compiled.draws_ahead.
+        how_to_draw`)."""
         from ..threads import blas_threads
 
-        return draws_ahead(
+        return how_to_draw(
             nsteps=nsteps, values_per_step=self._step_values,
             serial_loop=not self.parallel and not self.layout.threaded,
             numba_threads=_threads(), blas_threads=blas_threads(),
         )  # fmt: skip
 
+    def _drawn_together(self, pool: Any, helpers: int, k0: int, nsteps: int) -> Array:
+        """The step data of the steps ``k0 + 1 .. k0 + nsteps`` (all members), drawn by this
+        thread and ``helpers`` threads of ``pool`` (:class:`~isoflow._compiled.draws_ahead.
+        StepDraws`)."""
+        everyone = slice(None)
+        draws = StepDraws(lambda k, n: self._step_data(k, n, everyone), k0, nsteps)
+        for _ in range(helpers):
+            pool.submit(draws.help)
+        return draws.result()
+
     def _call_in_pieces(self, nsteps: int, grid: SaveGrid, buf: Array) -> None:
         """The chunk's steps in :func:`~isoflow._compiled.draws_ahead.pieces`, each piece's
-        step data drawn on another thread while the loop runs the piece before (and by this
+        step data drawn by helper threads while the loop runs the piece before (and by this
         thread too once the loop is done: :class:`~isoflow._compiled.draws_ahead.StepDraws`)."""
         from concurrent.futures import ThreadPoolExecutor
 
         everyone = slice(None)
-
-        def draw(k: int, n: int) -> Array:
-            return self._step_data(k, n, everyone)
-
+        helpers = _threads() - 1
         sizes = pieces(nsteps)
         k0 = self.k
         row = 0
         try:
-            with ThreadPoolExecutor(1, thread_name_prefix="isoflow-draws") as pool:
-                first = StepDraws(draw, k0, sizes[0])
-                pool.submit(first.help)
-                data = first.result()
+            with ThreadPoolExecutor(helpers, thread_name_prefix="isoflow-draws") as pool:
+                data = self._drawn_together(pool, helpers, k0, sizes[0])
                 for j, n in enumerate(sizes):
                     ahead = None
                     if j + 1 < len(sizes):
-                        ahead = StepDraws(draw, k0 + n, sizes[j + 1])
-                        pool.submit(ahead.help)
+                        ahead = StepDraws(
+                            lambda k, m: self._step_data(k, m, everyone), k0 + n, sizes[j + 1]
+                        )
+                        for _ in range(helpers):
+                            pool.submit(ahead.help)
                     r = grid.count(k0, k0 + n)
                     self.rec[:, driver.REC_CALL_DONE] = 0.0
                     self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
@@ -520,10 +528,18 @@ class CompiledRunner(Runner):
         before = self._arrays(everyone) if self.may_raise else None
         raised: Exception | None = None
         try:
-            if self._draws_ahead(nsteps):
+            how = self._how_to_draw(nsteps)
+            if how == "ahead":
                 self._call_in_pieces(nsteps, grid, buf)
             else:
-                self._call(self._args(everyone, nsteps, self.k, grid, buf))
+                data = None
+                if how == "together":
+                    from concurrent.futures import ThreadPoolExecutor
+
+                    helpers = _threads() - 1
+                    with ThreadPoolExecutor(helpers, thread_name_prefix="isoflow-draws") as pool:
+                        data = self._drawn_together(pool, helpers, self.k, nsteps)
+                self._call(self._args(everyone, nsteps, self.k, grid, buf, data))
         except Exception as exc:  # the field raised (a parallel driver says SystemError)
             if before is None or self._drive is None:
                 raise
