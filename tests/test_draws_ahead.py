@@ -102,6 +102,19 @@ def test_step_draws_wait_for_the_helpers_step_in_progress() -> None:
     assert sorted(caller_steps) == [11, 12, 13, 14]
 
 
+def test_cancelled_step_draws_hand_out_no_more_steps() -> None:
+    drawn: list[int] = []
+
+    def draw(k: int, n: int) -> np.ndarray:
+        drawn.append(k)
+        return _numbered(k, n)
+
+    draws = ahead.StepDraws(draw, 0, 6)
+    draws.cancel()
+    draws.help()
+    assert drawn == []
+
+
 @pytest.mark.parametrize(("failing", "helper"), [(2, True), (5, False)])
 def test_step_draws_raise_an_error_of_either_thread(failing: int, helper: bool) -> None:
     def draw(k: int, n: int) -> np.ndarray:

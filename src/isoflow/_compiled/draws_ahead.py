@@ -155,6 +155,12 @@ class StepDraws:
             self._stored += 1
             self._ready.notify_all()
 
+    def cancel(self) -> None:
+        """Hand out no more steps (a helper finishes the step it holds): the caller stopped
+        before it needs them."""
+        with self._ready:
+            self._hi = self._lo
+
     def help(self) -> None:
         """Draw steps from the first on until none is left (the helper thread's part)."""
         while (s := self._take(front=True)) is not None:

@@ -501,21 +501,28 @@ class CompiledRunner(Runner):
         try:
             with ThreadPoolExecutor(helpers, thread_name_prefix="isoflow-draws") as pool:
                 data = self._drawn_together(pool, helpers, k0, sizes[0])
-                for j, n in enumerate(sizes):
-                    ahead = None
-                    if j + 1 < len(sizes):
-                        ahead = StepDraws(
-                            lambda k, m: self._step_data(k, m, everyone), k0 + n, sizes[j + 1]
-                        )
-                        for _ in range(helpers):
-                            pool.submit(ahead.help)
-                    r = grid.count(k0, k0 + n)
-                    self.rec[:, driver.REC_CALL_DONE] = 0.0
-                    self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
-                    k0 += n
-                    row += r
+                ahead: StepDraws | None = None
+                try:
+                    for j, n in enumerate(sizes):
+                        ahead = None
+                        if j + 1 < len(sizes):
+                            ahead = StepDraws(
+                                lambda k, m: self._step_data(k, m, everyone), k0 + n,
+                                sizes[j + 1],
+                            )  # fmt: skip
+                            for _ in range(helpers):
+                                pool.submit(ahead.help)
+                        r = grid.count(k0, k0 + n)
+                        self.rec[:, driver.REC_CALL_DONE] = 0.0
+                        self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
+                        k0 += n
+                        row += r
+                        if ahead is not None:
+                            data = ahead.result()
+                except BaseException:
                     if ahead is not None:
-                        data = ahead.result()
+                        ahead.cancel()  # the helpers stop before the pool is shut down
+                    raise
         except Exception:
             # no member finished the chunk: :meth:`_advance` redoes them all from its start
             # when their field may raise (as after a raise in an undivided chunk)
