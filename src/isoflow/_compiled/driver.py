@@ -202,8 +202,9 @@ def run_unit(  # type: ignore[no-untyped-def]
             rec[m0 + q, REC_CALL_DONE] = 1.0
         return
     # A step that changes the state before its solve (earlier substeps, a split step's first
-    # half) keeps the state it started from, to freeze a failed lane there.
-    keep_start = P > 1 or plan.begin
+    # half) keeps the state it started from, to freeze a failed lane there (not a begin that
+    # fills scratch rows only: the stochastic step's noise term).
+    keep_start = P > 1 or plan.begin_moves
     if sv.shape[2] == S:  # the runner's buffers (large units)
         vec = sv[tid]
         X = vec[0]

@@ -57,7 +57,12 @@ class Plan(NamedTuple):
     kmax : int
         Stage offsets kept for the initial guess (0: start from the state).
     begin : bool
-        Whether the stage has an explicit part before its solve (a split step).
+        Whether the stage has an explicit part before its solve (a split step's half flow,
+        the stochastic step's noise term).
+    begin_moves : bool
+        Whether that part changes the state (a split step's half flow) and not only scratch
+        rows: the driver then keeps the state a step starts from, to freeze a failed lane
+        there.
     """
 
     h: float
@@ -67,13 +72,17 @@ class Plan(NamedTuple):
     k_final: int
     kmax: int
     begin: bool
+    begin_moves: bool
 
     @classmethod
-    def of(cls, h: float, nsteps: int, k0: int, grid: SaveGrid, kmax: int, begin: bool) -> Plan:
+    def of(
+        cls, h: float, nsteps: int, k0: int, grid: SaveGrid, kmax: int, begin: bool,
+        begin_moves: bool = True,
+    ) -> Plan:  # fmt: skip
         """The plan of a call of ``nsteps`` steps from ``k0`` on ``grid``."""
         return cls(
             float(h), int(nsteps), int(k0), int(grid.every), int(grid.k_final), int(kmax),
-            bool(begin),
+            bool(begin), bool(begin and begin_moves),
         )  # fmt: skip
 
 

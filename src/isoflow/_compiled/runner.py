@@ -416,7 +416,10 @@ class CompiledRunner(Runner):
             None if units.start is None else units.start * L,
             None if units.stop is None else units.stop * L,
         )
-        plan = Plan.of(self.h, nsteps, k0, grid, self.kmax, self.impl.begin is not None)
+        plan = Plan.of(
+            self.h, nsteps, k0, grid, self.kmax, self.impl.begin is not None,
+            self.impl.begin_moves_state,
+        )  # fmt: skip
         if data is None:
             data = self._step_data(k0, nsteps, members)
         return (

@@ -86,6 +86,7 @@ class StageOnLayout:
     iterate: Any
     finish: Any
     nwork: int
+    begin_moves_state: bool = True
 
 
 def _no_offsets(method: Any, problem: Any) -> int:
@@ -137,6 +138,11 @@ class CompiledStage:
     begin : numba dispatcher or None
         An explicit part before each solve (a split step's half flow, the stochastic step's
         noise term in a scratch row), or none.
+    begin_moves_state : bool
+        Whether ``begin`` changes the state (a split step's half flow). ``False`` when it only
+        fills scratch rows (the stochastic step's noise term): the driver then keeps no copy
+        of the state a step starts from, and a single system's step swaps its two state
+        buffers instead of copying the new state back.
     step_data : callable or None
         ``(method, problem, request) -> (nsteps, members, D)`` float array: what the stage
         reads per step and member (``sd`` of the interface, e.g. noise increments; row ``i``
@@ -166,6 +172,7 @@ class CompiledStage:
     offsets: Callable[[Any, Any], int] = _no_offsets
     params: Callable[[Any, Any, Layout, tuple[float, ...]], tuple[Any, ...]] = _no_params
     begin: Any = None
+    begin_moves_state: bool = True
     step_data: Callable[[Any, Any, StepDataRequest], Any] | None = None
     compensated: Callable[[Any], bool] = _not_compensated
     applies: Callable[[Any, Any, bool], bool] = _always
@@ -180,10 +187,12 @@ class CompiledStage:
         if spec is not None:
             it, fin = spec.choose(layout)
             begin = None if spec.skips_begin else self.begin
-            return StageOnLayout(begin, it, fin, spec.rows(layout))
+            return StageOnLayout(begin, it, fin, spec.rows(layout), self.begin_moves_state)
         if not self.needs <= layout.blocks:
             return None
-        return StageOnLayout(self.begin, self.iterate, self.finish, self.nwork)
+        return StageOnLayout(
+            self.begin, self.iterate, self.finish, self.nwork, self.begin_moves_state
+        )
 
 
 #: Method class -> its compiled stage.
@@ -387,6 +396,7 @@ register(
         stochastic_isomp.NWORK,
         params=stochastic_isomp.noise_params,
         begin=stochastic_isomp.begin,
+        begin_moves_state=False,  # the noise term, into a scratch row
         step_data=_method_step_data,
         applies=lambda method, problem, composed: (
             not composed and stochastic_isomp.compiled_noise(problem)
