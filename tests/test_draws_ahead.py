@@ -277,3 +277,21 @@ def test_an_error_while_drawing_a_later_piece_reaches_the_caller(
     with pytest.raises(RuntimeError, match="the draws failed"):
         iso.solve(prob, iso.StochasticIsoMP(), y0, dt=0.05, n_steps=90, progress=False)
     assert pieces_taken
+
+
+def test_a_step_that_cannot_be_stored_is_an_error_not_a_wait() -> None:
+    """A step of another shape than the piece's first one fails to store: the error reaches
+    the caller, who does not wait for the step forever."""
+
+    def draw(k: int, n: int) -> np.ndarray:
+        return np.zeros((n, 2, 4 if k == 2 else 3))
+
+    draws = ahead.StepDraws(draw, 0, 6)
+    helper = threading.Thread(target=draws.help)
+    helper.start()
+    helper.join(60)
+    assert not helper.is_alive()
+    with ThreadPoolExecutor(1) as pool:
+        result = pool.submit(draws.result)
+        with pytest.raises(ValueError, match="broadcast"):
+            result.result(60)

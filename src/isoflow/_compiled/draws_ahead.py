@@ -140,20 +140,23 @@ class StepDraws:
             return self._hi
 
     def _draw_one(self, s: int) -> None:
+        """Draw step ``s`` and store it; whatever goes wrong (the draw, the piece's buffer,
+        a step of another shape) is handed to :meth:`result`, and the step counts as done
+        either way, so that nobody waits for it."""
         try:
             one = self._draw(self._k0 + s, 1)
-        except BaseException as exc:  # handed to the caller by :meth:`result`
             with self._ready:
-                self._error = exc
+                if self._out is None:
+                    self._out = np.empty((self._n, *one.shape[1:]), dtype=one.dtype)
+                self._out[s] = one[0]
+        except BaseException as exc:
+            with self._ready:
+                if self._error is None:
+                    self._error = exc
+        finally:
+            with self._ready:
                 self._stored += 1
                 self._ready.notify_all()
-            return
-        with self._ready:
-            if self._out is None:
-                self._out = np.empty((self._n, *one.shape[1:]), dtype=one.dtype)
-            self._out[s] = one[0]
-            self._stored += 1
-            self._ready.notify_all()
 
     def cancel(self) -> None:
         """Hand out no more steps (a helper finishes the step it holds): the caller stopped
