@@ -222,6 +222,26 @@ def test_an_ensemble_drawn_together_gives_the_run_drawn_inline_bit_for_bit(
 
 
 @needs_two_cores
+def test_a_run_whose_writer_works_beside_its_loop_draws_inline(
+    pieces_taken: list[int], drawn_together: list[int]
+) -> None:
+    """Saving many rows puts the diagnostics on a writer thread: on two cores the writer and
+    the loop take both, and the draws stay on the loop's thread."""
+    from isoflow._writers import PIPELINE_MIN_ROWS
+
+    prob, y0 = _thermal_lattice()
+    n = PIPELINE_MIN_ROWS + 10
+    iso.solve(prob, iso.StochasticIsoMP(), y0, dt=0.05, n_steps=n, save_every=n, progress=False)
+    assert pieces_taken  # few rows: no writer thread, the draws go ahead
+    pieces_taken.clear()
+    drawn_together.clear()
+    a, b = _both(prob, iso.StochasticIsoMP(), y0, dt=0.05, n_steps=n, save_every=1)
+    if available_cores() == 2:
+        assert not pieces_taken and not drawn_together
+    np.testing.assert_array_equal(a.ys, b.ys)
+
+
+@needs_two_cores
 def test_a_member_that_fails_inside_a_piece_fails_as_in_the_undivided_run(
     pieces_taken: list[int],
 ) -> None:
@@ -249,7 +269,7 @@ def test_a_field_that_raises_inside_a_piece_fails_as_in_the_undivided_run(
         B=lambda W: C * W, algebra=alg, kernel=iso.CompiledB(uk.raises_when_large, (C, 0.31)),
         noise=TransportNoise(fields=0.05 * field[None] / np.linalg.norm(field), seed=2),
     )  # fmt: skip
-    a, b = _both(prob, iso.StochasticIsoMP(), W0, dt=0.1, n_steps=500, throw=False)
+    a, b = _both(prob, iso.StochasticIsoMP(), W0, dt=0.1, n_steps=500, save_every=5, throw=False)
     assert pieces_taken
     k = int(b.failed_step)
     assert 5 < k < 500

@@ -81,6 +81,9 @@ class Runner:
     checkpoints_at_saves : bool
         Whether a checkpoint of it must fall on a save point (the time loop then ends its
         chunks there).
+    threads_beside : int
+        Threads the run keeps busy beside the runner's (the time loop's background writer):
+        a runner that draws its noise on helper threads leaves their cores to them.
     """
 
     k: int
@@ -88,6 +91,7 @@ class Runner:
     label: str = "runner"
     parallel: bool = False
     checkpoints_at_saves: bool = False
+    threads_beside: int = 0
 
     def __init__(self) -> None:
         self.exceptions: dict[int, BaseException] = {}

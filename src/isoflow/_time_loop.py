@@ -255,6 +255,7 @@ def open_run(
     background = (
         series and not runner.parallel and grid.count(runner.k, grid.k_final) >= PIPELINE_MIN_ROWS
     )
+    runner.threads_beside = 1 if background else 0  # the writer's thread
     sink = Sink(out, accumulator, series, background=background)
     r = OpenRun(problem, method, start, t0, dt, grid, runner, out, sink, accumulator, memory,
                 diagnostics, pools, used)  # fmt: skip

@@ -25,7 +25,8 @@ steps of a run are split into calls (:mod:`isoflow._compiled.driver`). The rule
 (:func:`how_to_draw`): the run's thread plan gives numba at least two threads and BLAS one
 (:mod:`isoflow.threads`; ``threads=1`` turns it off), the chunk has two steps or more, and a
 step's data holds at least :data:`DRAW_AHEAD_MIN_VALUES` values; the helpers are the numba
-threads but one (the caller's). A
+threads but the caller's and the background writer's (a serial run that saves many rows
+computes their diagnostics on a thread of its own: on two cores its draws stay inline). A
 field that raises in any piece makes the whole chunk count as not done, so the runner redoes
 it from its start as it does after a raise in an undivided chunk. The extra thread lives for
 one chunk (a thread pool kept across calls would not survive a ``fork`` of the process).
@@ -87,6 +88,10 @@ def how_to_draw(
     * ``"ahead"``: in pieces beside a serial loop (:func:`pieces`, :class:`StepDraws`);
     * ``"together"``: before a loop that runs on numba threads itself (members, or a chain's
       sweeps), the caller and ``numba_threads - 1`` helpers drawing the steps at once.
+
+    ``numba_threads`` counts the threads the draws may use: the run's numba threads less those
+    it keeps busy beside the loop (the background writer of a serial run that saves many
+    rows).
     """
     if (
         nsteps < 2
@@ -106,8 +111,8 @@ class StepDraws:
 
     When the draws of a piece take longer than the loop's piece before them (a long spin chain:
     a few memory sweeps an iteration against ``3 N`` normal quantiles a step), the caller's
-    core draws the rest instead of waiting: the two threads of the run's plan stay busy and
-    never more than two run. The data is the same whoever draws a step.
+    core draws the rest instead of waiting: the threads of the run's plan stay busy, and no
+    more run than it has. The data is the same whoever draws a step.
 
     Parameters
     ----------

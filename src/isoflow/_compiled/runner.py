@@ -466,7 +466,8 @@ class CompiledRunner(Runner):
                 f"the step data of {self.stage.name} has shape {data.shape}, not "
                 f"({nsteps}, {idx.size}, D)"
             )
-        self._step_values = data.shape[1] * data.shape[2]
+        if members == slice(None):  # not a member redone alone (:meth:`_isolate`)
+            self._step_values = data.shape[1] * data.shape[2]
         return data
 
     def _how_to_draw(self, nsteps: int) -> str:
@@ -477,8 +478,13 @@ class CompiledRunner(Runner):
         return how_to_draw(
             nsteps=nsteps, values_per_step=self._step_values,
             serial_loop=not self.parallel and not self.layout.threaded,
-            numba_threads=_threads(), blas_threads=blas_threads(),
+            numba_threads=_threads() - self.threads_beside, blas_threads=blas_threads(),
         )  # fmt: skip
+
+    def _draw_helpers(self) -> int:
+        """Helper threads that draw step data: the numba threads but the caller's and those
+        the run keeps busy beside the loop (:attr:`threads_beside`)."""
+        return _threads() - 1 - self.threads_beside
 
     def _drawn_together(self, pool: Any, helpers: int, k0: int, nsteps: int) -> Array:
         """The step data of the steps ``k0 + 1 .. k0 + nsteps`` (all members), drawn by this
@@ -497,7 +503,7 @@ class CompiledRunner(Runner):
         from concurrent.futures import ThreadPoolExecutor
 
         everyone = slice(None)
-        helpers = _threads() - 1
+        helpers = self._draw_helpers()
         sizes = pieces(nsteps)
         k0 = self.k
         row = 0
@@ -546,7 +552,7 @@ class CompiledRunner(Runner):
                 if how == "together":
                     from concurrent.futures import ThreadPoolExecutor
 
-                    helpers = _threads() - 1
+                    helpers = self._draw_helpers()
                     with ThreadPoolExecutor(helpers, thread_name_prefix="isoflow-draws") as pool:
                         data = self._drawn_together(pool, helpers, self.k, nsteps)
                 self._call(self._args(everyone, nsteps, self.k, grid, buf, data))
