@@ -147,17 +147,17 @@ def pieces_taken(monkeypatch: pytest.MonkeyPatch) -> list[int]:
 
 @pytest.fixture
 def drawn_together(monkeypatch: pytest.MonkeyPatch) -> list[int]:
-    """Every step data counts; the chunks drawn by several threads before the loop are
-    counted (the first piece of a chunk in pieces is drawn so too)."""
+    """Every step data counts; the steps drawn by helper threads are counted, chunk by chunk
+    or piece by piece."""
     monkeypatch.setattr(ahead, "DRAW_AHEAD_MIN_VALUES", 1)
     taken: list[int] = []
-    original = compiled_runner.CompiledRunner._drawn_together
+    original = compiled_runner.CompiledRunner._start_draws
 
     def counting(self, pool, helpers, k0, nsteps):  # type: ignore[no-untyped-def]
         taken.append(nsteps)
         return original(self, pool, helpers, k0, nsteps)
 
-    monkeypatch.setattr(compiled_runner.CompiledRunner, "_drawn_together", counting)
+    monkeypatch.setattr(compiled_runner.CompiledRunner, "_start_draws", counting)
     return taken
 
 

@@ -486,41 +486,41 @@ class CompiledRunner(Runner):
         the run keeps busy beside the loop (:attr:`threads_beside`)."""
         return _threads() - 1 - self.threads_beside
 
-    def _drawn_together(self, pool: Any, helpers: int, k0: int, nsteps: int) -> Array:
-        """The step data of the steps ``k0 + 1 .. k0 + nsteps`` (all members), drawn by this
-        thread and ``helpers`` threads of ``pool`` (:class:`~isoflow._compiled.draws_ahead.
-        StepDraws`)."""
+    def _start_draws(self, pool: Any, helpers: int, k0: int, nsteps: int) -> StepDraws:
+        """The step data of the steps ``k0 + 1 .. k0 + nsteps`` (all members), ``helpers``
+        threads of ``pool`` drawing it from now on (:class:`~isoflow._compiled.draws_ahead.
+        StepDraws`; its ``result()`` draws the rest on this thread)."""
         everyone = slice(None)
         draws = StepDraws(lambda k, n: self._step_data(k, n, everyone), k0, nsteps)
         for _ in range(helpers):
             pool.submit(draws.help)
-        return draws.result()
+        return draws
+
+    def _draw_pool(self) -> Any:
+        """A pool of :meth:`_draw_helpers` threads for one chunk (a pool kept across chunks
+        would not survive a ``fork`` of the process)."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        return ThreadPoolExecutor(self._draw_helpers(), thread_name_prefix="isoflow-draws")
 
     def _call_in_pieces(self, nsteps: int, grid: SaveGrid, buf: Array) -> None:
         """The chunk's steps in :func:`~isoflow._compiled.draws_ahead.pieces`, each piece's
         step data drawn by helper threads while the loop runs the piece before (and by this
         thread too once the loop is done: :class:`~isoflow._compiled.draws_ahead.StepDraws`)."""
-        from concurrent.futures import ThreadPoolExecutor
-
         everyone = slice(None)
         helpers = self._draw_helpers()
         sizes = pieces(nsteps)
         k0 = self.k
         row = 0
         try:
-            with ThreadPoolExecutor(helpers, thread_name_prefix="isoflow-draws") as pool:
-                data = self._drawn_together(pool, helpers, k0, sizes[0])
+            with self._draw_pool() as pool:
+                data = self._start_draws(pool, helpers, k0, sizes[0]).result()
                 ahead: StepDraws | None = None
                 try:
                     for j, n in enumerate(sizes):
                         ahead = None
                         if j + 1 < len(sizes):
-                            ahead = StepDraws(
-                                lambda k, m: self._step_data(k, m, everyone), k0 + n,
-                                sizes[j + 1],
-                            )  # fmt: skip
-                            for _ in range(helpers):
-                                pool.submit(ahead.help)
+                            ahead = self._start_draws(pool, helpers, k0 + n, sizes[j + 1])
                         r = grid.count(k0, k0 + n)
                         self.rec[:, driver.REC_CALL_DONE] = 0.0
                         self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
@@ -550,11 +550,9 @@ class CompiledRunner(Runner):
             else:
                 data = None
                 if how == "together":
-                    from concurrent.futures import ThreadPoolExecutor
-
-                    helpers = self._draw_helpers()
-                    with ThreadPoolExecutor(helpers, thread_name_prefix="isoflow-draws") as pool:
-                        data = self._drawn_together(pool, helpers, self.k, nsteps)
+                    with self._draw_pool() as pool:
+                        draws = self._start_draws(pool, self._draw_helpers(), self.k, nsteps)
+                        data = draws.result()
                 self._call(self._args(everyone, nsteps, self.k, grid, buf, data))
         except Exception as exc:  # the field raised (a parallel driver says SystemError)
             if before is None or self._drive is None:
