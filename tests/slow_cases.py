@@ -167,6 +167,13 @@ LONG = (
 
 #: The only default users of their compiled loop (measured, 2026-11-26; see the module).
 OWN_LOOP = (
+    # the stochastic stages, drawn ahead or together: loops of the noise only the slow run compiles
+    "tests/test_draws_ahead.py::test_pieces_give_the_undivided_run_bit_for_bit",
+    "tests/test_draws_ahead.py::test_an_ensemble_drawn_together_gives_the_run_drawn_inline_bit_for_bit",
+    "tests/test_draws_ahead.py::test_a_run_whose_writer_works_beside_its_loop_draws_inline",
+    "tests/test_draws_ahead.py::test_a_member_that_fails_inside_a_piece_fails_as_in_the_undivided_run",
+    "tests/test_draws_ahead.py::test_a_field_that_raises_inside_a_piece_fails_as_in_the_undivided_run",
+    "tests/test_draws_ahead.py::test_an_error_while_drawing_a_later_piece_reaches_the_caller",
     "tests/test_budget_files.py::test_budgets_and_spectra_are_saved_per_save_and_read_back[qg]",
     "tests/test_budget_files.py::test_plot_draws_the_budgets_spectra_and_zonal_wind",
     "tests/test_compensated.py::test_increments_below_the_rounding_of_the_state_add_up[dense BLAS]",
