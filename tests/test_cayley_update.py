@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import isoflow as iso
-from helpers import eigenvalue_drift, length_drift
+from helpers import check_cayley_keeps_lengths, eigenvalue_drift
 from isoflow import io
 from isoflow.methods.isomp import cayley_increment
 from isoflow.reference import reference_solution
@@ -189,21 +189,7 @@ def test_particles_keep_every_length_whatever_the_tolerance(name: str) -> None:
     1e-10; at ``rtol = 1e-14`` it is the midpoint update to 1e-12; the compiled finish (the
     chain's fused sweeps, the particle blocks, the vortex layout) is the NumPy one."""
     prob, y0 = _spins()[name]
-    kw = dict(dt=0.05, n_steps=200, progress=False)
-    loose = iso.FixedPoint(rtol=1e-6)
-    mid = iso.solve(prob, iso.IsoMP(solver=loose), y0, **kw)
-    cay = iso.solve(prob, cayley(1e-6), y0, **kw)
-    assert "compiled" in cay.stats.runner and "Cayley update" in cay.stats.runner
-    assert length_drift(mid.ys, y0) > 1e-10
-    assert length_drift(cay.ys, y0) < 1e-14
-    short = dict(kw, n_steps=40)
-    tight = iso.solve(prob, cayley(1e-14), y0, **short)
-    plain = iso.solve(prob, iso.IsoMP(), y0, **short)
-    assert np.max(np.abs(tight.ys - plain.ys)) <= 1e-12
-    numpy_path = iso.solve(dataclasses.replace(prob, kernel=None), cayley(1e-8), y0, **short)
-    fast = iso.solve(prob, cayley(1e-8), y0, **short)
-    assert numpy_path.stats.runner == "NumPy"
-    assert np.max(np.abs(fast.ys - numpy_path.ys)) <= 1e-12
+    check_cayley_keeps_lengths(prob, y0, iso.IsoMP, n_steps=200, n_short=40)
 
 
 def _ensemble_of(prob: Any, y0: Any, M: int) -> Any:

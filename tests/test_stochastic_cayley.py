@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import isoflow as iso
-from helpers import eigenvalue_drift, length_drift
+from helpers import check_cayley_keeps_lengths, eigenvalue_drift
 from isoflow import io
 
 
@@ -160,20 +160,7 @@ def test_thermal_spins_keep_every_length_whatever_the_tolerance(make: Any) -> No
     stays to 1e-14 at ``rtol = 1e-6`` (the midpoint update: more than 1e-10 off), the
     midpoint's paths at ``rtol = 1e-14``, and the compiled finish is the NumPy one."""
     prob, y0 = make()
-    kw = dict(dt=0.05, n_steps=100, progress=False)
-    mid = iso.solve(prob, iso.StochasticIsoMP(solver=iso.FixedPoint(rtol=1e-6)), y0, **kw)
-    cay = iso.solve(prob, cayley(1e-6), y0, **kw)
-    assert "compiled" in cay.stats.runner and "Cayley update" in cay.stats.runner
-    assert length_drift(mid.ys, y0) > 1e-10
-    assert length_drift(cay.ys, y0) < 1e-14
-    short = dict(kw, n_steps=30)
-    tight = iso.solve(prob, cayley(1e-14), y0, **short)
-    plain = iso.solve(prob, iso.StochasticIsoMP(), y0, **short)
-    assert np.max(np.abs(tight.ys - plain.ys)) <= 1e-12
-    numpy_path = iso.solve(dataclasses.replace(prob, kernel=None), cayley(), y0, **short)
-    fast = iso.solve(prob, cayley(), y0, **short)
-    assert numpy_path.stats.runner == "NumPy"
-    assert np.max(np.abs(fast.ys - numpy_path.ys)) <= 1e-12
+    check_cayley_keeps_lengths(prob, y0, iso.StochasticIsoMP, n_steps=100, n_short=30)
 
 
 def test_an_ensemble_of_small_members_runs_it_on_the_lanes() -> None:
