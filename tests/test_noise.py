@@ -18,6 +18,7 @@ from scipy.special import ndtri
 import isoflow as iso
 from isoflow import noise
 from isoflow._compiled.dense import dense_layout
+from isoflow._compiled.spin_chain import PARALLEL_MIN_SPINS
 from isoflow._compiled.stages import stage_for, stochastic_isomp
 from isoflow._errors import InvalidBError, ParameterError, ShapeError
 from isoflow.methods._base import StepDataRequest
@@ -401,17 +402,48 @@ def test_the_blas_iterations_with_noise_take_the_numpy_paths_steps(make, kind) -
     assert float(np.max(c.diagnostics.casimir_drift)) < 1e-13
 
 
-def test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps() -> None:
-    # site noise and one constant field on the Heisenberg chain (the (3, N) layout's fused
-    # sweep) against the NumPy path: the same steps to rounding, |S_i| kept
-    prob, w0 = iso.models.heisenberg_chain(30, initial="random", seed=1)
-    field = np.zeros((1, 30, 3))
+def _chain_noise(kind: str, N: int, seed: int) -> TransportNoise:
+    """Noise on a chain of ``N`` spins: site noise, one constant field, or both."""
+    field = np.zeros((1, N, 3))
     field[0, :, 2] = 0.2
-    noisy = dataclasses.replace(prob, noise=TransportNoise(field, seed=2, site=0.3))
+    if kind == "site":
+        return TransportNoise(seed=seed, site=0.3)
+    if kind == "field":
+        return TransportNoise(field, seed=seed)
+    return TransportNoise(field, seed=seed, site=0.3)
+
+
+@pytest.mark.parametrize("update", ["midpoint", "cayley"])
+@pytest.mark.parametrize("kind", ["site", "field", "field and site"])
+def test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps(
+    kind: str, update: str
+) -> None:
+    # the Heisenberg chain's fused sweeps (the (3, N) layout; the step's noise term formed once
+    # a step by their own begin) against the NumPy path: the same steps to rounding, |S_i| kept
+    prob, w0 = iso.models.heisenberg_chain(30, initial="random", seed=1)
+    noisy = dataclasses.replace(prob, noise=_chain_noise(kind, 30, 2))
     kw = {"dt": 0.02, "n_steps": 50, "progress": False}
-    fused = iso.solve(noisy, iso.StochasticIsoMP(), w0, **kw)
-    plain = iso.solve(dataclasses.replace(noisy, kernel=None), iso.StochasticIsoMP(), w0, **kw)
+    method = iso.StochasticIsoMP(update=update, solver=iso.FixedPoint(rtol=1e-14))
+    fused = iso.solve(noisy, method, w0, **kw)
+    plain = iso.solve(dataclasses.replace(noisy, kernel=None), method, w0, **kw)
     assert "spin chain" in fused.stats.runner and plain.stats.runner == "NumPy"
     assert float(np.abs(fused.ys - plain.ys).max()) < 1e-12
     assert float(np.abs(fused.ys[-1] - w0).max()) > 0.05
     assert float(np.abs(np.linalg.norm(fused.ys, axis=-1) - 1).max()) < 1e-13
+
+
+@pytest.mark.parametrize("kind", ["site", "field and site"])
+def test_the_chains_threaded_stochastic_sweeps_equal_the_serial_ones(kind: str) -> None:
+    # a chain long enough for threaded sweeps (numba threads over chunks, the noise term read
+    # by every chunk) against the serial sweeps of threads=1: the same states to rounding
+    N = PARALLEL_MIN_SPINS
+    prob, w0 = iso.models.heisenberg_chain(N, initial="random", seed=3)
+    noisy = dataclasses.replace(prob, noise=_chain_noise(kind, N, 4))
+    kw = {"dt": 0.05, "n_steps": 6, "save_every": 3, "progress": False}
+    threaded = iso.solve(noisy, iso.StochasticIsoMP(), w0, **kw)
+    if "threaded sweeps" not in threaded.stats.runner:
+        pytest.skip("numba has one thread here: the sweeps are not threaded")
+    serial = iso.solve(noisy, iso.StochasticIsoMP(), w0, threads=1, **kw)
+    assert "threaded" not in serial.stats.runner
+    assert float(np.abs(threaded.ys - serial.ys).max()) < 1e-13
+    assert float(np.abs(threaded.ys[-1] - w0).max()) > 1e-3

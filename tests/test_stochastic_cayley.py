@@ -153,7 +153,7 @@ def test_the_named_method_defaults_to_a_loose_tolerance() -> None:
         ),
         lambda: iso.models.spin_lattice((8, 8), seed=2, temperature=0.5, damping=0.1, noise_seed=3),
     ],
-    ids=["thermal chain (fused)", "thermal lattice (R^3, x)^N"],
+    ids=["thermal chain", "thermal lattice"],
 )
 def test_thermal_spins_keep_every_length_whatever_the_tolerance(make: Any) -> None:
     """Spins at finite temperature (stochastic LLG): with the Cayley update every ``|S_i|``

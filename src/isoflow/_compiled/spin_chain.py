@@ -48,7 +48,9 @@ from .particles import (
 
 __all__ = [
     "PARALLEL_MIN_SPINS",
+    "STO_NWORK",
     "SpinChain",
+    "begin_sto",
     "chain_layout",
     "finish_iso",
     "finish_iso_cayley",
@@ -402,8 +404,12 @@ def spherical_sweeps(layout: Layout) -> tuple[Any, Any]:
 # ---- the stochastic midpoint's fused sweeps ------------------------------------------------------
 # The noise of a step enters ``B_i`` as ``(1/h) (sum_j sd_j F_j + sigma_i dbeta_i)``
 # (:mod:`isoflow._compiled.stages.stochastic_isomp`: ``mp = (fields, site_pos, site_amp)``, the
-# fields in this layout, the site noise of spin ``i`` at ``sd[0, m + 3 i + a]``), read in the
-# same sweep: 48 more bytes a spin than IsoMP's, no more passes.
+# fields in this layout, the site noise of spin ``i`` at ``sd[0, m + 3 i + a]``). :func:`begin_sto`
+# forms that term once a step, in the ``(3, N)`` layout, into the last scratch row, and every
+# sweep reads it there: 24 more bytes a spin than IsoMP's sweep, in unit stride (reading the
+# increments, interleaved by spin, and the amplitudes in each sweep took twice IsoMP's time).
+# The term is the same floating-point value the sweeps formed before (no contraction), so the
+# states are unchanged to the last bit.
 
 
 @numba.njit(cache=True, inline="always")
@@ -436,42 +442,66 @@ def _noise_at(fields, amp, row, N, i, inv):  # type: ignore[no-untyped-def]
     return inv * n0, inv * n1, inv * n2
 
 
+@numba.njit(cache=True, fastmath=_STATE)
+def _noise_term(fields, amp, row, N, inv, T):  # type: ignore[no-untyped-def]
+    """``T`` (the ``(3, N)`` layout) ``=`` the noise term of every ``B_i``; site noise alone
+    (the thermal case) in a loop of its own, which vectorizes."""
+    n = _U(N)
+    n2 = n + n
+    if fields.shape[0] == 0 and amp.shape[0] > 0:
+        for i in range(N):
+            k = _U(i)
+            T[k], T[n + k], T[n2 + k] = _site_noise_at(amp, row, i, inv)
+        return
+    for i in range(N):
+        k = _U(i)
+        T[k], T[n + k], T[n2 + k] = _noise_at(fields, amp, row, N, i, inv)
+
+
+@numba.njit(cache=True)
+def begin_sto(f, fargs, lay, mp, sd, W, work, h):  # type: ignore[no-untyped-def]
+    """The step's noise term of ``B_i`` into the last scratch row, once a step (the fused
+    sweeps' ``begin``; ``f`` is not called)."""
+    fields, _, amp = mp
+    _noise_term(fields, amp, sd[0], lay.N, 1.0 / h, work[work.shape[0] - 1])
+
+
 @numba.njit(cache=True, inline="always")
-def _sto_one(X, W, G, N, i, im, ip, c, half, quarter, fields, amp, row, inv):  # type: ignore[no-untyped-def]
+def _noise_of(T, N, i):  # type: ignore[no-untyped-def]
+    """Spin ``i``'s noise term, as :func:`begin_sto` left it in ``T``."""
+    n, k = _U(N), _U(i)
+    return T[k], T[n + k], T[n + n + k]
+
+
+@numba.njit(cache=True, inline="always")
+def _sto_one(X, W, G, N, i, im, ip, c, half, quarter, T):  # type: ignore[no-untyped-def]
     b0, b1, b2 = _b(X, N, c, im, ip)
-    n0, n1, n2 = _noise_at(fields, amp, row, N, i, inv)
+    n0, n1, n2 = _noise_of(T, N, i)
     return _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
 
 
 @numba.njit(cache=True, fastmath=_STATE)
-def _sto_block(lo, hi, r, X, W, G, N, c, half, quarter, fields, amp, row, inv):  # type: ignore[no-untyped-def]
+def _sto_block(lo, hi, r, X, W, G, N, c, half, quarter, T):  # type: ignore[no-untyped-def]
     """The stochastic sweep over the interior spins ``lo <= i < hi``, squared changes into
-    ``r``; site noise alone (the thermal case) in a loop of its own, which vectorizes."""
-    if fields.shape[0] == 0 and amp.shape[0] > 0:
-        for i in range(lo, hi):
-            b0, b1, b2 = _b(X, N, c, i - 1, i + 1)
-            n0, n1, n2 = _site_noise_at(amp, row, i, inv)
-            r[i - lo] = _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
-        return
+    ``r``."""
     for i in range(lo, hi):
-        r[i - lo] = _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter, fields, amp, row, inv)
+        r[i - lo] = _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter, T)
 
 
 @numba.njit(cache=True)
 def iterate_sto_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
-    """One stochastic-midpoint sweep over the chain (IsoMP's with the step's noise)."""
+    """One stochastic-midpoint sweep over the chain (IsoMP's with the step's noise term,
+    :func:`begin_sto`'s)."""
     N = lay.N
     c = lay.c
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
-    inv = 1.0 / hp
-    fields, _, amp = mp
-    row = sd[0]
-    acc = _sto_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter, fields, amp, row, inv)
+    T = work[work.shape[0] - 1]
+    acc = _sto_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter, T)
     if N > 1:
-        args = (X, W, G, N, c, half, quarter, fields, amp, row, inv)
+        args = (X, W, G, N, c, half, quarter, T)
         acc += _blocked(_sto_block, 1, N - 1, work[0], args)
-        acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)
+        acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, T)
     rr[0] = acc
 
 
@@ -483,9 +513,7 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     nch = lay.nch
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
-    inv = 1.0 / hp
-    fields, _, amp = mp
-    row = sd[0]
+    T = work[work.shape[0] - 1]
     size = (N + nch - 1) // nch
     part = np.zeros(nch)
     for ch in numba.prange(nch):
@@ -493,27 +521,22 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
             r = _buffer(work[0], ch, nch)
-            args = (X, W, G, N, c, half, quarter, fields, amp, row, inv)
+            args = (X, W, G, N, c, half, quarter, T)
             part[ch] = _blocked(_sto_block, lo, hi, r, args)
     acc = part.sum()
-    acc += _sto_one(X, W, G, N, 0, N - 1, 1, c, half, quarter, fields, amp, row, inv)
-    acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, fields, amp, row, inv)
+    acc += _sto_one(X, W, G, N, 0, N - 1, 1, c, half, quarter, T)
+    acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, T)
     rr[0] = acc
 
 
 @numba.njit(cache=True, fastmath=_STATE)
-def _final_sto(X, W, Wn, N, c, hp, fields, amp, row):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B~(X) x X``, the step's noise in ``B~``."""
-    inv = 1.0 / hp
-    site_only = fields.shape[0] == 0 and amp.shape[0] > 0
+def _final_sto(X, W, Wn, N, c, hp, T):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B~(X) x X``, the step's noise term ``T`` in ``B~``."""
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
         b0, b1, b2 = _b(X, N, c, im, ip)
-        if site_only:
-            n0, n1, n2 = _site_noise_at(amp, row, i, inv)
-        else:
-            n0, n1, n2 = _noise_at(fields, amp, row, N, i, inv)
+        n0, n1, n2 = _noise_of(T, N, i)
         _final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
 
 
@@ -521,9 +544,12 @@ def _final_sto(X, W, Wn, N, c, hp, fields, amp, row):  # type: ignore[no-untyped
 def finish_sto(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B~(X) x X`` from the accepted ``X``, the step's noise in ``B~`` (not
     compensated: ``E`` is empty)."""
-    fields, _, amp = mp
-    _final_sto(X, W, Wn, lay.N, lay.c, hp, fields, amp, sd[0])
+    _final_sto(X, W, Wn, lay.N, lay.c, hp, work[work.shape[0] - 1])
     fin[0] = math.isfinite(_size(Wn))
+
+
+#: Scratch rows of the stochastic sweeps: the residuals' buffers and the step's noise term.
+STO_NWORK = 2
 
 
 def stochastic_sweeps(layout: Layout) -> tuple[Any, Any]:
@@ -592,19 +618,13 @@ def _cayley_final(X, W, Wn, E, N, c, hp):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, fastmath=_STATE)
-def _cayley_final_sto(X, W, Wn, E, N, c, hp, fields, amp, row):  # type: ignore[no-untyped-def]
-    """The Cayley finish with the step's noise in ``B~`` (as :func:`_final_sto` reads it)."""
+def _cayley_final_sto(X, W, Wn, E, N, c, hp, T):  # type: ignore[no-untyped-def]
+    """The Cayley finish with the step's noise term ``T`` in ``B~`` (as :func:`_final_sto`)."""
     half = 0.5 * hp
-    inv = 1.0 / hp
-    site_only = fields.shape[0] == 0 and amp.shape[0] > 0
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
-        if site_only:
-            noise = _site_noise_at(amp, row, i, inv)
-        else:
-            noise = _noise_at(fields, amp, row, N, i, inv)
-        _cayley_one(X, W, Wn, E, N, i, im, ip, c, half, noise)
+        _cayley_one(X, W, Wn, E, N, i, im, ip, c, half, _noise_of(T, N, i))
 
 
 @numba.njit(cache=True)
@@ -618,8 +638,7 @@ def finish_iso_cayley(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  
 @numba.njit(cache=True)
 def finish_sto_cayley(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """:func:`finish_iso_cayley` with the step's noise in ``B~`` (as :func:`finish_sto`)."""
-    fields, _, amp = mp
-    _cayley_final_sto(X, W, Wn, E, lay.N, lay.c, hp, fields, amp, sd[0])
+    _cayley_final_sto(X, W, Wn, E, lay.N, lay.c, hp, work[work.shape[0] - 1])
     fin[0] = math.isfinite(_size(Wn))
 
 

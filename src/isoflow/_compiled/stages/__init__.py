@@ -63,15 +63,15 @@ class Specialization:
         Scratch rows per unit, or ``layout -> rows`` when they depend on the choice.
     why : str
         The benchmark that justifies it.
-    skips_begin : bool
-        The fused evaluation does without the stage's ``begin`` (it reads what ``begin``
-        prepares by itself; default ``False``).
+    begin : callable or None
+        Its own ``begin`` in place of the stage's (what its iteration reads, prepared in its
+        own form), or ``None`` for the stage's.
     """
 
     choose: Callable[[Layout], tuple[Any, Any]]
     nwork: int | Callable[[Layout], int]
     why: str
-    skips_begin: bool = False
+    begin: Any = None
 
     def rows(self, layout: Layout) -> int:
         """Scratch rows per unit on ``layout``."""
@@ -186,7 +186,7 @@ class CompiledStage:
         spec = self.specializations.get(type(layout.record))
         if spec is not None:
             it, fin = spec.choose(layout)
-            begin = None if spec.skips_begin else self.begin
+            begin = spec.begin if spec.begin is not None else self.begin
             return StageOnLayout(begin, it, fin, spec.rows(layout), self.begin_moves_state)
         if not self.needs <= layout.blocks:
             return None
@@ -280,15 +280,15 @@ def _with_cayley_finish(
     iterates: tuple[Any, Any] = (dense_planar.iterate, dense_tiles.iterate),
     rows: Callable[[Layout], int] = _dense_blas_rows,
     blocks_finish: Any = None,
-    chain: Callable[[Layout], tuple[Any, Any]] | None = None,
+    chain: Specialization | None = None,
 ) -> CompiledStage:  # fmt: skip
     """``stage`` with the Cayley update's finishes ``(planar, tiles)`` after the BLAS
     iterations ``iterates`` (``(planar, tiles)``, IsoMP's by default, with ``rows`` scratch
     rows) on the BLAS layout (the finish inverts with LAPACK). With ``blocks_finish``, also on
     the layouts that provide the ``cayley_increment`` block (small dense states and their
-    lanes, particles), after the stage's own iteration, and with ``chain`` (``layout ->
-    (iterate, finish)``) on the spin chain's fused sweeps; elsewhere the run takes the NumPy
-    path (the split step on small states)."""
+    lanes, particles), after the stage's own iteration, and with ``chain`` (a
+    :class:`Specialization` with the Cayley finish) on the spin chain's fused sweeps;
+    elsewhere the run takes the NumPy path (the split step on small states)."""
     planar, tiles = finishes
     iterate_planar, iterate_tiles = iterates
     specializations: dict[type, Specialization] = {
@@ -297,12 +297,7 @@ def _with_cayley_finish(
         ),
     }
     if chain is not None:
-        specializations[SpinChain] = Specialization(
-            chain,
-            1,
-            "the chain's fused sweeps (benchmarks 4, 5, 18), the Cayley finish a step",
-            skips_begin=True,
-        )
+        specializations[SpinChain] = chain
     needs = {"evaluate_B", "bracket_triple", "stage_update", "advance_state"}
     needs.add("cayley_increment" if blocks_finish is not None else "(BLAS layout only)")
     return dataclasses.replace(
@@ -321,7 +316,11 @@ _ISOMP_CAYLEY = _with_cayley_finish(
     (cayley.finish_planar, cayley.finish_tiles),
     "IsoMP's iteration (benchmarks 3, 10, 12); the Cayley finish pays at small N (benchmark 22)",
     blocks_finish=cayley.finish_blocks,
-    chain=spin_chain.isomp_cayley_sweeps,
+    chain=Specialization(
+        spin_chain.isomp_cayley_sweeps,
+        1,
+        "the chain's fused sweeps (benchmarks 4, 5), the Cayley finish a step",
+    ),
 )
 
 register(
@@ -412,9 +411,9 @@ register(
             ),
             SpinChain: Specialization(
                 spin_chain.stochastic_sweeps,
-                1,
-                "benchmark 18: IsoMP's fused sweep with the noise read in it",
-                skips_begin=True,
+                spin_chain.STO_NWORK,
+                "benchmark 18: IsoMP's fused sweep with the step's noise term, formed once",
+                begin=spin_chain.begin_sto,
             ),
         },
     ),
@@ -438,5 +437,10 @@ _STOCHASTIC_CAYLEY = _with_cayley_finish(
     iterates=(stochastic_isomp.iterate_planar, stochastic_isomp.iterate_tiles),
     rows=_stochastic_blas_rows,
     blocks_finish=cayley.finish_blocks,
-    chain=spin_chain.stochastic_cayley_sweeps,
+    chain=Specialization(
+        spin_chain.stochastic_cayley_sweeps,
+        spin_chain.STO_NWORK,
+        "the chain's fused sweeps (benchmark 18), the Cayley finish a step",
+        begin=spin_chain.begin_sto,
+    ),
 )
