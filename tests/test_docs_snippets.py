@@ -33,8 +33,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "isoflow"
-#: Directories of docs/ that the build generates (not sources).
-GENERATED = ("_build", "api", "auto_examples")
+#: Directories and files of docs/ that the build generates (not sources; sphinx-gallery writes
+#: ``sg_execution_times.rst`` beside ``index.rst``).
+GENERATED = ("_build", "api", "auto_examples", "sg_execution_times.rst")
 
 _RST_CODE = re.compile(r"^(\s*)\.\. (?:code-block|code|sourcecode)::\s*(python3?|py|pycon)\s*$")
 _RST_DIRECTIVE = re.compile(r"^(\s*)\.\. [\w:-]+::")
