@@ -98,6 +98,7 @@ LONG = (
     "tests/test_noise.py::test_stochastic_vortices_and_sphere_keep_their_casimirs_on_every_path",
     "tests/test_noise.py::test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps",
     "tests/test_noise.py::test_the_chains_threaded_stochastic_sweeps_equal_the_serial_ones",
+    "tests/test_noise.py::test_the_damped_chain_runs_on_the_fused_sweeps_as_on_the_generic_stage",
     "tests/test_noise_spins.py::test_thermal_chain_keeps_every_spin_length_per_path",
     "tests/test_sweep.py::test_every_member_equals_a_serial_solve[brockett]",
     "tests/test_semidirect.py::test_compiled_pairs_with_anderson_and_the_heavy_top_equal_the_numpy",

@@ -24,6 +24,7 @@ def _model_cases():
         "brockett": iso.models.brockett(5),
         "brockett in a frame": iso.models.brockett(4, N=N),
         "spin chain": iso.models.heisenberg_chain(9, initial="random", seed=1),
+        "damped spin chain": iso.models.heisenberg_chain(9, initial="random", seed=1, damping=0.3),
         "sphere vortices": (sphere, x),
         "hyperbolic vortices": (hyper, w),
     }
@@ -71,6 +72,31 @@ def test_builtin_kernels_validate_their_parameters() -> None:
         iso.ElementwiseLinear(np.ones((2, 2)), frame=np.ones((2, 2)))
     with pytest.raises(iso.ParameterError, match="coupling"):
         iso.SpinNeighbourSum("strong")  # type: ignore[arg-type]
+    for bad in (-0.1, np.nan, np.inf, True, "0.1"):
+        with pytest.raises(iso.ParameterError, match="damping"):
+            iso.SpinNeighbourSum(-1.0, damping=bad)  # type: ignore[arg-type]
+
+
+def test_the_damped_neighbour_sum_is_the_llg_field() -> None:
+    """``SpinNeighbourSum(c, damping=lam)``: ``h_i + lam w_i x h_i`` with ``h_i = c (w_{i-1} +
+    w_{i+1})``, written out here per spin; zero damping is the plain sum."""
+    rng = np.random.default_rng(3)
+    W = rng.standard_normal((2, 7, 3))
+    h = -0.7 * (np.roll(W, 1, axis=-2) + np.roll(W, -1, axis=-2))
+    want = np.empty_like(h)
+    for m in range(2):
+        for i in range(7):
+            s0, s1, s2 = W[m, i]
+            h0, h1, h2 = h[m, i]
+            cross = np.array([s1 * h2 - s2 * h1, s2 * h0 - s0 * h2, s0 * h1 - s1 * h0])
+            want[m, i] = h[m, i] + 0.25 * cross
+    alg = iso.algebras.so3_vectors(7)
+    damped = iso.SpinNeighbourSum(-0.7, damping=0.25)
+    assert np.max(np.abs(damped.evaluate(W) - want)) < 1e-15
+    assert np.max(np.abs(Kernel.evaluate(damped, W, alg) - want)) < 1e-15
+    plain = iso.SpinNeighbourSum(-0.7)
+    assert np.array_equal(plain.evaluate(W), h)
+    assert iso.SpinNeighbourSum(-0.7, damping=0).field() == plain.field()
 
 
 def test_a_kernel_must_fit_its_space() -> None:

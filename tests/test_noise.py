@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -413,32 +414,70 @@ def _chain_noise(kind: str, N: int, seed: int) -> TransportNoise:
     return TransportNoise(field, seed=seed, site=0.3)
 
 
+def _noisy_chain(kind: str, N: int) -> tuple[iso.IsospectralProblem, np.ndarray]:
+    """The Heisenberg chain with ``kind`` of noise; ``"thermal"``: the model at ``T = 0.5``
+    with Gilbert damping 0.2 (the damped kernel)."""
+    if kind == "thermal":
+        return iso.models.heisenberg_chain(
+            N, initial="random", seed=1, temperature=0.5, damping=0.2, noise_seed=2
+        )
+    prob, w0 = iso.models.heisenberg_chain(N, initial="random", seed=1)
+    return dataclasses.replace(prob, noise=_chain_noise(kind, N, 2)), w0
+
+
 @pytest.mark.parametrize("update", ["midpoint", "cayley"])
-@pytest.mark.parametrize("kind", ["site", "field", "field and site"])
+@pytest.mark.parametrize("kind", ["site", "field", "field and site", "thermal"])
 def test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps(
     kind: str, update: str
 ) -> None:
-    # the Heisenberg chain's fused sweeps (the (3, N) layout; the step's noise term formed once
-    # a step by their own begin) against the NumPy path: the same steps to rounding, |S_i| kept
-    prob, w0 = iso.models.heisenberg_chain(30, initial="random", seed=1)
-    noisy = dataclasses.replace(prob, noise=_chain_noise(kind, 30, 2))
+    # the Heisenberg chain's fused sweeps (the (3, N) layout, the step's noise term formed once
+    # a step by the stage's begin; the thermal chain's damped kernel) against the generic
+    # particle stage (the same field as a CompiledB): the same states bit for bit; and against
+    # the NumPy path to rounding, |S_i| kept
+    prob, w0 = _noisy_chain(kind, 30)
+    kernel = prob.kernel
+    assert isinstance(kernel, iso.SpinNeighbourSum)
+    generic = dataclasses.replace(prob, kernel=iso.CompiledB(*kernel.field(), name="chain field"))
     kw = {"dt": 0.02, "n_steps": 50, "progress": False}
     method = iso.StochasticIsoMP(update=update, solver=iso.FixedPoint(rtol=1e-14))
-    fused = iso.solve(noisy, method, w0, **kw)
-    plain = iso.solve(dataclasses.replace(noisy, kernel=None), method, w0, **kw)
-    assert "spin chain" in fused.stats.runner and plain.stats.runner == "NumPy"
+    fused = iso.solve(prob, method, w0, **kw)
+    particles = iso.solve(generic, method, w0, **kw)
+    plain = iso.solve(dataclasses.replace(prob, kernel=None), method, w0, **kw)
+    assert "spin chain" in fused.stats.runner and "(R^3, x)^N" in particles.stats.runner
+    assert plain.stats.runner == "NumPy"
+    assert np.array_equal(fused.ys, particles.ys)
     assert float(np.abs(fused.ys - plain.ys).max()) < 1e-12
     assert float(np.abs(fused.ys[-1] - w0).max()) > 0.05
     assert float(np.abs(np.linalg.norm(fused.ys, axis=-1) - 1).max()) < 1e-13
 
 
-@pytest.mark.parametrize("kind", ["site", "field and site"])
+@pytest.mark.parametrize(
+    "method",
+    [iso.IsoMP(), iso.IsoMP(update="cayley"), iso.SphericalMidpoint()],
+    ids=["IsoMP", "Cayley update", "spherical midpoint"],
+)
+def test_the_damped_chain_runs_on_the_fused_sweeps_as_on_the_generic_stage(method: Any) -> None:
+    # Gilbert damping at T = 0 (the damped kernel on the chain's fused sweeps) against the generic
+    # particle stage: the same states bit for bit; the damping raises the model's Lyapunov
+    # function -H
+    prob, w0 = iso.models.heisenberg_chain(30, initial="random", seed=4, damping=0.3)
+    kernel = prob.kernel
+    generic = dataclasses.replace(prob, kernel=iso.CompiledB(*kernel.field(), name="chain field"))
+    kw = {"dt": 0.05, "n_steps": 60, "progress": False}
+    fused = iso.solve(prob, method, w0, **kw)
+    particles = iso.solve(generic, method, w0, **kw)
+    assert "spin chain" in fused.stats.runner and "(R^3, x)^N" in particles.stats.runner
+    assert np.array_equal(fused.ys, particles.ys)
+    lyapunov = prob.lyapunov
+    assert lyapunov is not None
+    assert float(lyapunov(fused.ys[-1])) > float(lyapunov(w0)) + 0.1
+
+
+@pytest.mark.parametrize("kind", ["site", "field and site", "thermal"])
 def test_the_chains_threaded_stochastic_sweeps_equal_the_serial_ones(kind: str) -> None:
     # a chain long enough for threaded sweeps (numba threads over chunks, the noise term read
     # by every chunk) against the serial sweeps of threads=1: the same states to rounding
-    N = PARALLEL_MIN_SPINS
-    prob, w0 = iso.models.heisenberg_chain(N, initial="random", seed=3)
-    noisy = dataclasses.replace(prob, noise=_chain_noise(kind, N, 4))
+    noisy, w0 = _noisy_chain(kind, PARALLEL_MIN_SPINS)
     kw = {"dt": 0.05, "n_steps": 6, "save_every": 3, "progress": False}
     threaded = iso.solve(noisy, iso.StochasticIsoMP(), w0, **kw)
     if "threaded sweeps" not in threaded.stats.runner:

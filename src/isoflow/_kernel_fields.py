@@ -150,6 +150,24 @@ def neighbour_sum(W, out, c):  # type: ignore[no-untyped-def]
             out[i, a] = c * (W[im, a] + W[ip, a])
 
 
+@numba.njit(cache=True)
+def neighbour_sum_gilbert(W, out, c, lam):  # type: ignore[no-untyped-def]
+    r"""``out_i = h_i + lam w_i x h_i`` with ``h_i = c (w_{i-1} + w_{i+1})``, periodic, on
+    ``(N, 3)``: the neighbour sum with Gilbert damping (the chain's fused sweeps,
+    :mod:`isoflow._compiled.spin_chain`, form the same terms in the same order)."""
+    N = W.shape[0]
+    for i in range(N):
+        im = i - 1 if i > 0 else N - 1
+        ip = i + 1 if i < N - 1 else 0
+        h0 = c * (W[im, 0] + W[ip, 0])
+        h1 = c * (W[im, 1] + W[ip, 1])
+        h2 = c * (W[im, 2] + W[ip, 2])
+        s0, s1, s2 = W[i, 0], W[i, 1], W[i, 2]
+        out[i, 0] = h0 + lam * (s1 * h2 - s2 * h1)
+        out[i, 1] = h1 + lam * (s2 * h0 - s0 * h2)
+        out[i, 2] = h2 + lam * (s0 * h1 - s1 * h0)
+
+
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def pair_field(X, B, circ, c, N, lorentz):  # type: ignore[no-untyped-def]
     r"""The pair sum :math:`B_i = c \sum_{j \ne i} \Gamma_j\, q(D_{ij})\, x_j` on flat

@@ -379,18 +379,28 @@ class ElementwiseLinear(Kernel):
 
 @dataclass(frozen=True)
 class SpinNeighbourSum(Kernel):
-    r"""``B_i(w) = c\,(w_{i-1} + w_{i+1})`` on :math:`(\mathbb{R}^3,\times)^N`, periodic.
+    r"""``B_i(w) = c\,(w_{i-1} + w_{i+1})`` on :math:`(\mathbb{R}^3,\times)^N`, periodic, with
+    optional Gilbert damping.
 
     The Heisenberg chain is ``c = -1`` (:math:`B_i = -\nabla_i H`,
-    :math:`H = \sum_i w_i\cdot w_{i+1}`).
+    :math:`H = \sum_i w_i\cdot w_{i+1}`). With damping :math:`\lambda > 0`,
+
+    .. math:: B_i(w) = h_i + \lambda\, w_i \times h_i, \qquad h_i = c\,(w_{i-1} + w_{i+1}),
+
+    the Landau–Lifshitz–Gilbert field in double-bracket form (``docs/theory/stochastic.rst``;
+    :func:`isoflow.models.heisenberg_chain` with ``damping``). Runs on the chain's fused
+    compiled sweeps either way.
 
     Parameters
     ----------
     coupling : float
         The factor ``c``.
+    damping : float
+        The Gilbert damping :math:`\lambda \ge 0` (default 0).
     """
 
     coupling: float = -1.0
+    damping: float = 0.0
     name = "SpinNeighbourSum"
 
     def __post_init__(self) -> None:
@@ -400,11 +410,19 @@ class SpinNeighbourSum(Kernel):
         if not np.isfinite(c):
             raise ParameterError(f"SpinNeighbourSum: coupling must be finite, got {c!r}")
         object.__setattr__(self, "coupling", float(c))
+        lam = self.damping
+        if isinstance(lam, bool) or not isinstance(lam, (int, float, np.integer, np.floating)):
+            raise ParameterError(f"SpinNeighbourSum: damping must be a real number, got {lam!r}")
+        if not (np.isfinite(lam) and lam >= 0):
+            raise ParameterError(f"SpinNeighbourSum: damping must be finite and >= 0, got {lam!r}")
+        object.__setattr__(self, "damping", float(lam))
 
     def field(self) -> tuple[Callable[..., None], tuple[Any, ...]]:
         from . import _kernel_fields as kf
 
-        return kf.neighbour_sum, (self.coupling,)
+        if self.damping == 0.0:
+            return kf.neighbour_sum, (self.coupling,)
+        return kf.neighbour_sum_gilbert, (self.coupling, self.damping)
 
     def check(self, algebra: Algebra) -> None:
         from .algebras import SpinVectors
@@ -415,7 +433,8 @@ class SpinNeighbourSum(Kernel):
             )
 
     def evaluate(self, W: ArrayLike, algebra: Algebra | None = None) -> Array:
-        """``c (w_{i-1} + w_{i+1})`` over the particle axis (NumPy), periodic.
+        """``h_i + damping w_i x h_i``, ``h_i = c (w_{i-1} + w_{i+1})`` over the particle axis
+        (NumPy), periodic.
 
         Parameters
         ----------
@@ -429,7 +448,10 @@ class SpinNeighbourSum(Kernel):
         ndarray, shape (*batch, N, 3)
         """
         Wa = np.asarray(W, dtype=np.float64)
-        return self.coupling * (np.roll(Wa, 1, axis=-2) + np.roll(Wa, -1, axis=-2))
+        H = self.coupling * (np.roll(Wa, 1, axis=-2) + np.roll(Wa, -1, axis=-2))
+        if self.damping == 0.0:
+            return H
+        return H + self.damping * np.cross(Wa, H)
 
 
 #: The two geometries of :class:`PairwiseVortex`.

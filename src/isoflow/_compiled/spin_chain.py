@@ -1,6 +1,8 @@
 r"""Fused stages for spin chains: :class:`~isoflow.SpinNeighbourSum` in a ``(3, N)`` layout.
 
-``B_i(x) = c\,(x_{i-1} + x_{i+1})`` (periodic; the Heisenberg chain is ``c = -1``). The generic
+``B_i(x) = c\,(x_{i-1} + x_{i+1})`` (periodic; the Heisenberg chain is ``c = -1``), with Gilbert
+damping ``B_i = h_i + \lambda\, x_i \times h_i``, ``h_i = c\,(x_{i-1} + x_{i+1})`` (the thermal
+and damped chains; the damped sweeps compile apart, :func:`_b`). The generic
 particle stage (:mod:`isoflow._compiled.particles`) evaluates ``B`` into a buffer and then the
 stage map, which moves about twice the memory of one fused sweep; for long chains the step is
 memory bound, so this kernel keeps a specialized evaluation (benchmark 4): the state is held
@@ -17,7 +19,8 @@ one sweep that forms ``B_i`` from the neighbours on the fly:
 and order of operations as :mod:`isoflow._compiled.particles`, so both give the same iterates.
 Chains with many spins are cut into chunks over numba threads (the ``*_par`` stages).
 
-The record :class:`SpinChain` holds the number of spins, the coupling and the number of chunks.
+The record :class:`SpinChain` (:class:`DampedSpinChain` with damping) holds the number of spins,
+the coupling, the number of chunks (and the damping).
 The layout also provides the generic blocks (on the ``(3, N)`` layout), so every method with a
 compiled stage runs on it; IsoMP, the spherical midpoint and the stochastic midpoint (IsoMP's
 sweep with the step's noise added to ``B_i``) run the fused sweeps below, their named
@@ -31,6 +34,8 @@ from typing import Any, NamedTuple
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.extending import overload
 
 from ..algebras import SpinVectors
 from ..kernels import SpinNeighbourSum
@@ -47,10 +52,11 @@ from .particles import (
 )
 
 __all__ = [
+    "CHAIN_RECORDS",
     "PARALLEL_MIN_SPINS",
     "STO_NWORK",
+    "DampedSpinChain",
     "SpinChain",
-    "begin_sto",
     "chain_layout",
     "finish_iso",
     "finish_iso_cayley",
@@ -83,6 +89,21 @@ class SpinChain(NamedTuple):
     nch: int
 
 
+class DampedSpinChain(NamedTuple):
+    """:class:`SpinChain` with Gilbert damping ``lam > 0``: ``B_i = h_i + lam x_i x h_i``,
+    ``h_i = c (x_{i-1} + x_{i+1})``. A record class of its own, so numba compiles the damped
+    sweeps apart and the undamped ones stay as they were (:func:`_b`)."""
+
+    N: int
+    c: float
+    nch: int
+    lam: float
+
+
+#: The chain's record classes: its blocks and specializations are registered for both.
+CHAIN_RECORDS = (SpinChain, DampedSpinChain)
+
+
 #: The sweeps that write states: no signed zeros, never reassociation. With ``reassoc`` the
 #: new iterates' rounding could depend on what else LLVM saw when it compiled a sweep, so a
 #: loop compiled in a run's process and one loaded from numba's cache could disagree in the
@@ -100,19 +121,63 @@ _BLOCK = 2048
 _U = np.uint64
 
 
-@numba.njit(cache=True, inline="always")
-def _b(X, N, c, im, ip):  # type: ignore[no-untyped-def]
-    """``B_i = c (x_{i-1} + x_{i+1})`` from the flat ``(3, N)`` layout (neighbours ``im, ip``)."""
-    n, a, b = _U(N), _U(im), _U(ip)
-    n2 = n + n
-    return (
-        c * (X[a] + X[b]), c * (X[n + a] + X[n + b]), c * (X[n2 + a] + X[n2 + b]),
-    )  # fmt: skip
+def _b(X, N, c, i, im, ip):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled only
+    """``B_i`` of spin ``i`` from the flat ``(3, N)`` layout (neighbours ``im, ip``): with ``c``
+    a number (the coupling), ``c (x_{i-1} + x_{i+1})``; with ``c`` a :class:`DampedSpinChain`,
+    the neighbour sum ``h_i`` plus the Gilbert term ``lam x_i x h_i`` (the formulas and their
+    order are :func:`isoflow._kernel_fields.neighbour_sum_gilbert`'s). Chosen by the type of
+    ``c`` when numba compiles a sweep (:func:`_b_typed`; ``c`` is :func:`_coupling`'s)."""
+    raise NotImplementedError("_b runs inside compiled sweeps only")
+
+
+@overload(_b, inline="always")
+def _b_typed(X, N, c, i, im, ip):  # type: ignore[no-untyped-def]
+    """:func:`_b`'s two compiled forms, by the type of ``c``."""
+    if isinstance(c, types.Number):
+
+        def neighbour_sum(X, N, c, i, im, ip):  # type: ignore[no-untyped-def]
+            n, a, b = _U(N), _U(im), _U(ip)
+            n2 = n + n
+            return (
+                c * (X[a] + X[b]), c * (X[n + a] + X[n + b]), c * (X[n2 + a] + X[n2 + b]),
+            )  # fmt: skip
+
+        return neighbour_sum
+
+    def damped(X, N, c, i, im, ip):  # type: ignore[no-untyped-def]
+        cc, lam = c.c, c.lam
+        n, k, a, b = _U(N), _U(i), _U(im), _U(ip)
+        n2 = n + n
+        h0 = cc * (X[a] + X[b])
+        h1 = cc * (X[n + a] + X[n + b])
+        h2 = cc * (X[n2 + a] + X[n2 + b])
+        x0, x1, x2 = X[k], X[n + k], X[n2 + k]
+        return (
+            h0 + lam * (x1 * h2 - x2 * h1), h1 + lam * (x2 * h0 - x0 * h2),
+            h2 + lam * (x0 * h1 - x1 * h0),
+        )  # fmt: skip
+
+    return damped
+
+
+def _coupling(lay):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled only
+    """What :func:`_b` takes as ``c`` on the chain ``lay``: the coupling of a
+    :class:`SpinChain` (a number, as the sweeps always took), a :class:`DampedSpinChain`
+    itself (its fields are numbers: a tuple would not pass into numba's parallel loops)."""
+    raise NotImplementedError("_coupling runs inside compiled sweeps only")
+
+
+@overload(_coupling, inline="always")
+def _coupling_typed(lay):  # type: ignore[no-untyped-def]
+    """:func:`_coupling`'s two compiled forms, by the record's class."""
+    if getattr(lay, "instance_class", None) is DampedSpinChain:
+        return lambda lay: lay
+    return lambda lay: lay.c
 
 
 @numba.njit(cache=True, inline="always")
 def _iso_one(X, W, G, N, i, im, ip, c, half, quarter):  # type: ignore[no-untyped-def]
-    b0, b1, b2 = _b(X, N, c, im, ip)
+    b0, b1, b2 = _b(X, N, c, i, im, ip)
     return _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter)
 
 
@@ -137,7 +202,7 @@ def _smm_one(m, X, W, G, N, i, im, ip, c, half):  # type: ignore[no-untyped-def]
     n, k = _U(N), _U(i)  # unsigned: no negative-index wraparound, the loops vectorize
     n2 = n + n
     x0, x1, x2 = m[k], m[n + k], m[n2 + k]
-    b0, b1, b2 = _b(m, N, c, im, ip)
+    b0, b1, b2 = _b(m, N, c, i, im, ip)
     g0 = W[k] + half * (b1 * x2 - b2 * x1)
     g1 = W[n + k] + half * (b2 * x0 - b0 * x2)
     g2 = W[n2 + k] + half * (b0 * x1 - b1 * x0)
@@ -223,7 +288,7 @@ def iterate_iso_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     """One IsoMP sweep over the chain (``f`` is not called: ``B`` is formed on the fly;
     ``work[0]`` takes the spins' squared changes)."""
     N = lay.N
-    c = lay.c
+    c = _coupling(lay)
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
     acc = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter)
@@ -237,7 +302,7 @@ def iterate_iso_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
 def iterate_iso_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """:func:`iterate_iso_ser` with the chain cut into ``lay.nch`` chunks over numba threads."""
     N = lay.N
-    c = lay.c
+    c = _coupling(lay)
     nch = lay.nch
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
@@ -260,7 +325,7 @@ def iterate_smm_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     """One spherical-midpoint iteration: the points ``m`` (into ``work[0]``), then the sweep
     (the squared changes into ``work[1]``)."""
     N = lay.N
-    c = lay.c
+    c = _coupling(lay)
     half = 0.5 * hp
     m = work[0]
     _point_range(X, W, m, N, 0, N)
@@ -275,7 +340,7 @@ def iterate_smm_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
 def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """:func:`iterate_smm_ser` over ``lay.nch`` chunks on numba threads."""
     N = lay.N
-    c = lay.c
+    c = _coupling(lay)
     nch = lay.nch
     half = 0.5 * hp
     m = work[0]
@@ -305,7 +370,7 @@ def _final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
     n, k = _U(N), _U(i)
     n2 = n + n
     y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
-    b0, b1, b2 = _b(Y, N, c, im, ip)
+    b0, b1, b2 = _b(Y, N, c, i, im, ip)
     Wn[k], E[k] = two_sum(W[k], h * (b1 * y2 - b2 * y1) + E[k])
     Wn[n + k], E[n + k] = two_sum(W[n + k], h * (b2 * y0 - b0 * y2) + E[n + k])
     Wn[n2 + k], E[n2 + k] = two_sum(W[n2 + k], h * (b0 * y1 - b1 * y0) + E[n2 + k])
@@ -348,7 +413,7 @@ def _final_plain(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, inline="always")
 def _final_at_b(Y, W, Wn, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
-    b0, b1, b2 = _b(Y, N, c, im, ip)
+    b0, b1, b2 = _b(Y, N, c, i, im, ip)
     _final_at(Y, W, Wn, N, i, b0, b1, b2, h)
 
 
@@ -380,13 +445,13 @@ def _final_at(Y, W, Wn, N, i, b0, b1, b2, h):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def finish_iso(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(X) x X`` from the accepted ``X`` (the bracket of its last evaluation)."""
-    fin[0] = math.isfinite(_final(X, W, Wn, E, lay.N, lay.c, hp))
+    fin[0] = math.isfinite(_final(X, W, Wn, E, lay.N, _coupling(lay), hp))
 
 
 @numba.njit(cache=True)
 def finish_smm(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(m) x m`` with the points ``m`` of the last iteration (``work[0]``)."""
-    fin[0] = math.isfinite(_final(work[0], W, Wn, E, lay.N, lay.c, hp))
+    fin[0] = math.isfinite(_final(work[0], W, Wn, E, lay.N, _coupling(lay), hp))
 
 
 def isomp_sweeps(layout: Layout) -> tuple[Any, Any]:
@@ -402,80 +467,24 @@ def spherical_sweeps(layout: Layout) -> tuple[Any, Any]:
 
 
 # ---- the stochastic midpoint's fused sweeps ------------------------------------------------------
-# The noise of a step enters ``B_i`` as ``(1/h) (sum_j sd_j F_j + sigma_i dbeta_i)``
-# (:mod:`isoflow._compiled.stages.stochastic_isomp`: ``mp = (fields, site_pos, site_amp)``, the
-# fields in this layout, the site noise of spin ``i`` at ``sd[0, m + 3 i + a]``). :func:`begin_sto`
-# forms that term once a step, in the ``(3, N)`` layout, into the last scratch row, and every
-# sweep reads it there: 24 more bytes a spin than IsoMP's sweep, in unit stride (reading the
-# increments, interleaved by spin, and the amplitudes in each sweep took twice IsoMP's time).
-# The term is the same floating-point value the sweeps formed before (no contraction), so the
-# states are unchanged to the last bit.
-
-
-@numba.njit(cache=True, inline="always")
-def _site_noise_at(amp, row, i, inv):  # type: ignore[no-untyped-def]
-    """Site noise only: ``(sigma_i / h) dbeta_i`` (``amp[3 i] = sigma_i``, ``dbeta_i`` at
-    ``row[3 i .. 3 i + 2]``)."""
-    r = _U(3) * _U(i)
-    s = amp[r] * inv
-    return s * row[r], s * row[r + _U(1)], s * row[r + _U(2)]
-
-
-@numba.njit(cache=True, inline="always")
-def _noise_at(fields, amp, row, N, i, inv):  # type: ignore[no-untyped-def]
-    """The noise term of ``B_i``, ``(1/h) (sum_j row_j F_j + sigma_i dbeta_i)``."""
-    m = fields.shape[0]
-    n, k = _U(N), _U(i)
-    n0 = n1 = n2 = 0.0
-    for j in range(m):
-        c = row[j]
-        n0 += c * fields[j, k]
-        n1 += c * fields[j, n + k]
-        n2 += c * fields[j, n + n + k]
-    if amp.shape[0] > 0:
-        r = _U(3) * k
-        q = _U(m) + r
-        s = amp[r]
-        n0 += s * row[q]
-        n1 += s * row[q + _U(1)]
-        n2 += s * row[q + _U(2)]
-    return inv * n0, inv * n1, inv * n2
-
-
-@numba.njit(cache=True, fastmath=_STATE)
-def _noise_term(fields, amp, row, N, inv, T):  # type: ignore[no-untyped-def]
-    """``T`` (the ``(3, N)`` layout) ``=`` the noise term of every ``B_i``; site noise alone
-    (the thermal case) in a loop of its own, which vectorizes."""
-    n = _U(N)
-    n2 = n + n
-    if fields.shape[0] == 0 and amp.shape[0] > 0:
-        for i in range(N):
-            k = _U(i)
-            T[k], T[n + k], T[n2 + k] = _site_noise_at(amp, row, i, inv)
-        return
-    for i in range(N):
-        k = _U(i)
-        T[k], T[n + k], T[n2 + k] = _noise_at(fields, amp, row, N, i, inv)
-
-
-@numba.njit(cache=True)
-def begin_sto(f, fargs, lay, mp, sd, W, work, h):  # type: ignore[no-untyped-def]
-    """The step's noise term of ``B_i`` into the last scratch row, once a step (the fused
-    sweeps' ``begin``; ``f`` is not called)."""
-    fields, _, amp = mp
-    _noise_term(fields, amp, sd[0], lay.N, 1.0 / h, work[work.shape[0] - 1])
+# The noise of a step enters ``B_i`` as ``(1/h) (sum_j sd_j F_j + sigma_i dbeta_i)``. The stage's
+# own ``begin`` (:func:`isoflow._compiled.stages.stochastic_isomp.begin`) forms that term once a
+# step, in the chain's ``(3, N)`` layout, into the last scratch row, as it does on every layout,
+# and every sweep reads it there: 24 more bytes a spin than IsoMP's sweep, in unit stride
+# (reading the increments, interleaved by spin, and the amplitudes in each sweep took twice
+# IsoMP's time). The sweeps' iterates are those of the generic particle stage to the last bit.
 
 
 @numba.njit(cache=True, inline="always")
 def _noise_of(T, N, i):  # type: ignore[no-untyped-def]
-    """Spin ``i``'s noise term, as :func:`begin_sto` left it in ``T``."""
+    """Spin ``i``'s noise term, as the stage's ``begin`` left it in ``T``."""
     n, k = _U(N), _U(i)
     return T[k], T[n + k], T[n + n + k]
 
 
 @numba.njit(cache=True, inline="always")
 def _sto_one(X, W, G, N, i, im, ip, c, half, quarter, T):  # type: ignore[no-untyped-def]
-    b0, b1, b2 = _b(X, N, c, im, ip)
+    b0, b1, b2 = _b(X, N, c, i, im, ip)
     n0, n1, n2 = _noise_of(T, N, i)
     return _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
 
@@ -491,9 +500,9 @@ def _sto_block(lo, hi, r, X, W, G, N, c, half, quarter, T):  # type: ignore[no-u
 @numba.njit(cache=True)
 def iterate_sto_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """One stochastic-midpoint sweep over the chain (IsoMP's with the step's noise term,
-    :func:`begin_sto`'s)."""
+    the stage's ``begin`` formed it)."""
     N = lay.N
-    c = lay.c
+    c = _coupling(lay)
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
     T = work[work.shape[0] - 1]
@@ -509,7 +518,7 @@ def iterate_sto_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
 def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """:func:`iterate_sto_ser` with the chain cut into ``lay.nch`` chunks over numba threads."""
     N = lay.N
-    c = lay.c
+    c = _coupling(lay)
     nch = lay.nch
     half = 0.5 * hp
     quarter = 0.25 * hp * hp
@@ -535,7 +544,7 @@ def _final_sto(X, W, Wn, N, c, hp, T):  # type: ignore[no-untyped-def]
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
-        b0, b1, b2 = _b(X, N, c, im, ip)
+        b0, b1, b2 = _b(X, N, c, i, im, ip)
         n0, n1, n2 = _noise_of(T, N, i)
         _final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
 
@@ -544,7 +553,7 @@ def _final_sto(X, W, Wn, N, c, hp, T):  # type: ignore[no-untyped-def]
 def finish_sto(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B~(X) x X`` from the accepted ``X``, the step's noise in ``B~`` (not
     compensated: ``E`` is empty)."""
-    _final_sto(X, W, Wn, lay.N, lay.c, hp, work[work.shape[0] - 1])
+    _final_sto(X, W, Wn, lay.N, _coupling(lay), hp, work[work.shape[0] - 1])
     fin[0] = math.isfinite(_size(Wn))
 
 
@@ -590,7 +599,7 @@ def _cayley_plain_at(W, Wn, N, i, b0, b1, b2, half):  # type: ignore[no-untyped-
 @numba.njit(cache=True, inline="always")
 def _cayley_one(X, W, Wn, E, N, i, im, ip, c, half, noise):  # type: ignore[no-untyped-def]
     """Spin ``i`` of the Cayley finish; ``noise`` its term of ``B~`` (zeros without noise)."""
-    b0, b1, b2 = _b(X, N, c, im, ip)
+    b0, b1, b2 = _b(X, N, c, i, im, ip)
     n0, n1, n2 = noise
     if E.shape[0] != 0:
         _cayley_at(W, Wn, E, N, i, b0 + n0, b1 + n1, b2 + n2, half)
@@ -607,11 +616,11 @@ def _cayley_final(X, W, Wn, E, N, c, hp):  # type: ignore[no-untyped-def]
     _cayley_one(X, W, Wn, E, N, 0, N - 1, 1 % N, c, half, zero)
     if E.shape[0] != 0:
         for i in range(1, N - 1):
-            b0, b1, b2 = _b(X, N, c, i - 1, i + 1)
+            b0, b1, b2 = _b(X, N, c, i, i - 1, i + 1)
             _cayley_at(W, Wn, E, N, i, b0, b1, b2, half)
     else:
         for i in range(1, N - 1):
-            b0, b1, b2 = _b(X, N, c, i - 1, i + 1)
+            b0, b1, b2 = _b(X, N, c, i, i - 1, i + 1)
             _cayley_plain_at(W, Wn, N, i, b0, b1, b2, half)
     if N > 1:
         _cayley_one(X, W, Wn, E, N, N - 1, N - 2, 0, c, half, zero)
@@ -631,14 +640,14 @@ def _cayley_final_sto(X, W, Wn, E, N, c, hp, T):  # type: ignore[no-untyped-def]
 def finish_iso_cayley(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn_i = C_i W_i`` per spin, ``C_i`` the Cayley rotation of ``h/2 B_i(X)`` of the
     accepted ``X``."""
-    _cayley_final(X, W, Wn, E, lay.N, lay.c, hp)
+    _cayley_final(X, W, Wn, E, lay.N, _coupling(lay), hp)
     fin[0] = math.isfinite(_size(Wn))
 
 
 @numba.njit(cache=True)
 def finish_sto_cayley(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """:func:`finish_iso_cayley` with the step's noise in ``B~`` (as :func:`finish_sto`)."""
-    _cayley_final_sto(X, W, Wn, E, lay.N, lay.c, hp, work[work.shape[0] - 1])
+    _cayley_final_sto(X, W, Wn, E, lay.N, _coupling(lay), hp, work[work.shape[0] - 1])
     fin[0] = math.isfinite(_size(Wn))
 
 
@@ -673,7 +682,7 @@ def _evaluate_B(lay, f, fargs, X, B):  # type: ignore[no-untyped-def]
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
-        b0, b1, b2 = _b(X, N, lay.c, im, ip)
+        b0, b1, b2 = _b(X, N, _coupling(lay), i, im, ip)
         B[i] = b0
         B[N + i] = b1
         B[2 * N + i] = b2
@@ -709,15 +718,15 @@ def _spherical_point(lay, W, M, mid):  # type: ignore[no-untyped-def]
     _point_range(M, W, mid, lay.N, 0, lay.N)
 
 
-blocks.provide(blocks.evaluate_B, SpinChain)(_evaluate_B)
-blocks.provide(blocks.cayley_increment, SpinChain)(_cayley_increment)
-blocks.provide(blocks.bracket_triple, SpinChain)(_bracket_triple)
-blocks.provide(blocks.bracket, SpinChain)(_bracket)
-blocks.provide(blocks.spherical_point, SpinChain)(_spherical_point)
-blocks.provide(blocks.stage_update, SpinChain)(flat_stage_update)
-blocks.provide(blocks.stage_update1, SpinChain)(flat_stage_update1)
-blocks.provide(blocks.advance_state, SpinChain)(flat_advance_state)
-blocks.provide_member_defaults(SpinChain)
+blocks.provide(blocks.evaluate_B, *CHAIN_RECORDS)(_evaluate_B)
+blocks.provide(blocks.cayley_increment, *CHAIN_RECORDS)(_cayley_increment)
+blocks.provide(blocks.bracket_triple, *CHAIN_RECORDS)(_bracket_triple)
+blocks.provide(blocks.bracket, *CHAIN_RECORDS)(_bracket)
+blocks.provide(blocks.spherical_point, *CHAIN_RECORDS)(_spherical_point)
+blocks.provide(blocks.stage_update, *CHAIN_RECORDS)(flat_stage_update)
+blocks.provide(blocks.stage_update1, *CHAIN_RECORDS)(flat_stage_update1)
+blocks.provide(blocks.advance_state, *CHAIN_RECORDS)(flat_advance_state)
+blocks.provide_member_defaults(*CHAIN_RECORDS)
 
 
 def chain_layout(problem: Any, members: int, threads: int) -> Layout | None:
@@ -732,6 +741,8 @@ def chain_layout(problem: Any, members: int, threads: int) -> Layout | None:
         return None
     par = N >= PARALLEL_MIN_SPINS and threads > 1
     nch = 8 * threads if par else 1
+    c, lam = float(kernel.coupling), float(kernel.damping)
+    record = SpinChain(N, c, nch) if lam == 0.0 else DampedSpinChain(N, c, nch, lam)
 
     def to_units(Y: Any) -> Any:
         return np.ascontiguousarray(np.swapaxes(Y, -1, -2), dtype=np.float64).reshape(
@@ -743,7 +754,7 @@ def chain_layout(problem: Any, members: int, threads: int) -> Layout | None:
 
     return Layout(
         f"spin chain ((3, N) layout{', threaded sweeps' if par else ''})",
-        SpinChain(N, float(kernel.coupling), nch), to_units=to_units, from_units=from_units,
+        record, to_units=to_units, from_units=from_units,
         offsets_from_units=from_units, rows_from_flat=from_units, identity=False,
         threaded=par,
     )  # fmt: skip

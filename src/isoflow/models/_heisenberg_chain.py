@@ -7,17 +7,15 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
-from .._kernel_fields import neighbour_sum
 from .._seeds import generator
 from ..algebras.spin import SpinVectors, dot
-from ..kernels import CompiledB, Kernel, SpinNeighbourSum
+from ..kernels import SpinNeighbourSum
 from ..problems import IsospectralProblem
-from ._llg import gilbert, thermal_noise
+from ._llg import thermal_noise
 
 __all__ = ["heisenberg_chain", "paper_spin_curve"]
 
@@ -158,10 +156,10 @@ def heisenberg_chain(
         return np.sum(W, axis=-2)
 
     T, lam, noise = thermal_noise("heisenberg_chain", temperature, damping, noise_seed)
-    kernel: Kernel = SpinNeighbourSum(-1.0)  # the same B, for the compiled fast paths
+    # the same B (with the Gilbert term), for the chain's fused compiled sweeps
+    kernel = SpinNeighbourSum(-1.0, damping=lam)
     parameters: dict[str, Any] = {"N": N, "initial": source, "periodic": True}
     if lam > 0 or noise is not None:
-        kernel = CompiledB(chain_llg_field, (lam,), name="heisenberg_chain_llg")
         parameters |= {"temperature": T, "damping": lam, "noise_seed": getattr(noise, "seed", None)}
     problem = IsospectralProblem(
         B=None if lam > 0 else B,  # type: ignore[arg-type]
@@ -178,10 +176,3 @@ def heisenberg_chain(
         parameters=parameters,
     )
     return problem, w_init
-
-
-@numba.njit(cache=True)
-def chain_llg_field(W, out, lam):  # type: ignore[no-untyped-def]
-    r"""``B_i = H_i + lam w_i x H_i``, :math:`H_i = -(w_{i-1} + w_{i+1})` (periodic)."""
-    neighbour_sum(W, out, -1.0)
-    gilbert(W, out, lam)

@@ -38,7 +38,7 @@ from .. import (
 )
 from ..dense import DenseBlas
 from ..layout import Layout
-from ..spin_chain import SpinChain
+from ..spin_chain import CHAIN_RECORDS
 from . import isomp, spherical_midpoint, split, stochastic_isomp
 
 __all__ = [
@@ -63,19 +63,20 @@ class Specialization:
         Scratch rows per unit, or ``layout -> rows`` when they depend on the choice.
     why : str
         The benchmark that justifies it.
-    begin : callable or None
-        Its own ``begin`` in place of the stage's (what its iteration reads, prepared in its
-        own form), or ``None`` for the stage's.
     """
 
     choose: Callable[[Layout], tuple[Any, Any]]
     nwork: int | Callable[[Layout], int]
     why: str
-    begin: Any = None
 
     def rows(self, layout: Layout) -> int:
         """Scratch rows per unit on ``layout``."""
         return self.nwork(layout) if callable(self.nwork) else self.nwork
+
+
+def _on_chains(spec: Specialization) -> dict[type, Specialization]:
+    """``spec`` for every record class of the spin chain's layout (with and without damping)."""
+    return dict.fromkeys(CHAIN_RECORDS, spec)
 
 
 @dataclass(frozen=True)
@@ -186,8 +187,7 @@ class CompiledStage:
         spec = self.specializations.get(type(layout.record))
         if spec is not None:
             it, fin = spec.choose(layout)
-            begin = spec.begin if spec.begin is not None else self.begin
-            return StageOnLayout(begin, it, fin, spec.rows(layout), self.begin_moves_state)
+            return StageOnLayout(self.begin, it, fin, spec.rows(layout), self.begin_moves_state)
         if not self.needs <= layout.blocks:
             return None
         return StageOnLayout(
@@ -265,10 +265,12 @@ register(
                 "benchmarks 3, 10, 12: the triangular product and one tile pass; complex "
                 "states from n = PLANAR_MIN_N in real planes with 3M products (benchmark 12)",
             ),
-            SpinChain: Specialization(
-                spin_chain.isomp_sweeps,
-                1,
-                "benchmarks 4, 5: one fused memory sweep",
+            **_on_chains(
+                Specialization(
+                    spin_chain.isomp_sweeps,
+                    1,
+                    "benchmarks 4, 5: one fused memory sweep",
+                )
             ),
         },
     ),
@@ -297,7 +299,7 @@ def _with_cayley_finish(
         ),
     }
     if chain is not None:
-        specializations[SpinChain] = chain
+        specializations |= _on_chains(chain)
     needs = {"evaluate_B", "bracket_triple", "stage_update", "advance_state"}
     needs.add("cayley_increment" if blocks_finish is not None else "(BLAS layout only)")
     return dataclasses.replace(
@@ -333,10 +335,12 @@ register(
         spherical_midpoint.NWORK,
         offsets=_smm_offsets,
         specializations={
-            SpinChain: Specialization(
-                spin_chain.spherical_sweeps,
-                2,
-                "benchmark 5: fused memory sweeps",
+            **_on_chains(
+                Specialization(
+                    spin_chain.spherical_sweeps,
+                    2,
+                    "benchmark 5: fused memory sweeps",
+                )
             ),
         },
     ),
@@ -409,11 +413,12 @@ register(
                 _stochastic_blas_rows,
                 "IsoMP's iteration (benchmarks 3, 10, 12) on the field with the noise",
             ),
-            SpinChain: Specialization(
-                spin_chain.stochastic_sweeps,
-                spin_chain.STO_NWORK,
-                "benchmark 18: IsoMP's fused sweep with the step's noise term, formed once",
-                begin=spin_chain.begin_sto,
+            **_on_chains(
+                Specialization(
+                    spin_chain.stochastic_sweeps,
+                    spin_chain.STO_NWORK,
+                    "benchmark 18: IsoMP's fused sweep with the step's noise term",
+                )
             ),
         },
     ),
@@ -441,6 +446,5 @@ _STOCHASTIC_CAYLEY = _with_cayley_finish(
         spin_chain.stochastic_cayley_sweeps,
         spin_chain.STO_NWORK,
         "the chain's fused sweeps (benchmark 18), the Cayley finish a step",
-        begin=spin_chain.begin_sto,
     ),
 )
