@@ -20,20 +20,22 @@ stochastic / IsoMP <= 1.3 per step. Run alone: ``python benchmarks/bench_18_stoc
 Each case runs twice: with the default update and with ``update="cayley"`` (rows marked
 "Cayley update"; stage tolerance 1e-8, every Casimir kept to rounding on every path).
 
-**Missed** (idle machine, 2026-11-27 15:50 UTC, ``python benchmarks/run_all.py --only 18``):
+**Missed** (idle machine, 2026-11-27 18:59 UTC, ``python benchmarks/run_all.py --only 18``):
 
-* spin chain: 2.26 (stochastic 8.1 ms a step, IsoMP 3.6 ms; 17 and 14 iterations), with the
-  Cayley update 2.49 (7.4 ms against 3.0, 9 iterations). The ``3 * 10^5`` normals of a step
-  take 6.4 ms timed alone (numpy's Philox about 4 ns a word, ``scipy.special.ndtri`` and the
+* spin chain: 2.40 (stochastic 7.4 ms a step, IsoMP 3.1 ms; 17 and 14 iterations), with the
+  Cayley update 2.55 (7.5 ms against 3.0, 9 iterations). The ``3 * 10^5`` normals of a step
+  take 6.3 ms timed alone (numpy's Philox about 4 ns a word, ``scipy.special.ndtri`` and the
   passes around it about 17 ns a normal), more than the loop's step. A single system draws
   them on a second thread while its loop runs, and its own thread joins in once the loop is
   done (:mod:`isoflow._compiled.draws_ahead`; in runs of the same day the row read 4.07
-  before, 2.73 with the helper thread alone): the step is now about half the loop's work and
-  half the draws', each thread busy. Reaching 1.3 needs normals cheaper than ``ndtri`` (the
-  increments of existing runs would then change, and a resume must keep its path) or more
-  cores;
-* the ensemble: 8.16 (43.0 ms, 5.3 ms; 9.3 and 1.0 iterations a member), with the Cayley
-  update 5.71 (29.6 ms, 5.4 iterations). IsoMP's extrapolated start leaves one iteration a
+  before, 2.73 with the helper thread alone, 2.26 with both): the step waits on its draws.
+  The loop's sweep reads the step's noise term from one row in the chain's layout (144
+  against 304 us a sweep when it read the increments and amplitudes interleaved by spin),
+  which shows with ``threads=1`` (11.6-12.6 against 13.5-15.8 ms a step) and not here.
+  Reaching 1.3 needs normals cheaper than ``ndtri`` (the increments of existing runs would
+  then change, and a resume must keep its path) or more cores;
+* the ensemble: 7.69 (57.4 ms, 7.5 ms; 9.3 and 1.0 iterations a member), with the Cayley
+  update 5.93 (42.5 ms, 5.4 iterations). IsoMP's extrapolated start leaves one iteration a
   step; the stochastic step starts from the state. The stage offsets of a noisy path are not
   smooth in time, so the extrapolation does not apply, and the noise moves the stage away from
   the state. Per iteration the two cost about the same. A better start is not the fix

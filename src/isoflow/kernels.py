@@ -388,8 +388,8 @@ class SpinNeighbourSum(Kernel):
     .. math:: B_i(w) = h_i + \lambda\, w_i \times h_i, \qquad h_i = c\,(w_{i-1} + w_{i+1}),
 
     the Landau–Lifshitz–Gilbert field in double-bracket form (``docs/theory/stochastic.rst``;
-    :func:`isoflow.models.heisenberg_chain` with ``damping``). Runs on the chain's fused
-    compiled sweeps either way.
+    :func:`isoflow.models.heisenberg_chain` with ``damping``). Chains of two spins or more run
+    on the chain's fused compiled sweeps, with damping or without.
 
     Parameters
     ----------
@@ -415,7 +415,7 @@ class SpinNeighbourSum(Kernel):
             raise ParameterError(f"SpinNeighbourSum: damping must be a real number, got {lam!r}")
         if not (np.isfinite(lam) and lam >= 0):
             raise ParameterError(f"SpinNeighbourSum: damping must be finite and >= 0, got {lam!r}")
-        object.__setattr__(self, "damping", float(lam))
+        object.__setattr__(self, "damping", float(lam) + 0.0)  # -0.0 becomes 0.0
 
     def field(self) -> tuple[Callable[..., None], tuple[Any, ...]]:
         from . import _kernel_fields as kf
