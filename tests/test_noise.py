@@ -425,6 +425,14 @@ def _noisy_chain(kind: str, N: int) -> tuple[iso.IsospectralProblem, np.ndarray]
     return dataclasses.replace(prob, noise=_chain_noise(kind, N, 2)), w0
 
 
+def _on_the_generic_stage(prob: iso.IsospectralProblem) -> iso.IsospectralProblem:
+    """The chain ``prob`` with its kernel's field as a ``CompiledB``: the generic particle
+    stage instead of the chain's fused sweeps."""
+    kernel = prob.kernel
+    assert isinstance(kernel, iso.SpinNeighbourSum)
+    return dataclasses.replace(prob, kernel=iso.CompiledB(*kernel.field(), name="chain field"))
+
+
 @pytest.mark.parametrize("update", ["midpoint", "cayley"])
 @pytest.mark.parametrize("kind", ["site", "field", "field and site", "thermal"])
 def test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps(
@@ -435,9 +443,7 @@ def test_the_chains_fused_stochastic_sweep_takes_the_numpy_paths_steps(
     # particle stage (the same field as a CompiledB): the same states bit for bit; and against
     # the NumPy path to rounding, |S_i| kept
     prob, w0 = _noisy_chain(kind, 30)
-    kernel = prob.kernel
-    assert isinstance(kernel, iso.SpinNeighbourSum)
-    generic = dataclasses.replace(prob, kernel=iso.CompiledB(*kernel.field(), name="chain field"))
+    generic = _on_the_generic_stage(prob)
     kw = {"dt": 0.02, "n_steps": 50, "progress": False}
     method = iso.StochasticIsoMP(update=update, solver=iso.FixedPoint(rtol=1e-14))
     fused = iso.solve(prob, method, w0, **kw)
@@ -461,8 +467,7 @@ def test_the_damped_chain_runs_on_the_fused_sweeps_as_on_the_generic_stage(metho
     # particle stage: the same states bit for bit; the damping raises the model's Lyapunov
     # function -H
     prob, w0 = iso.models.heisenberg_chain(30, initial="random", seed=4, damping=0.3)
-    kernel = prob.kernel
-    generic = dataclasses.replace(prob, kernel=iso.CompiledB(*kernel.field(), name="chain field"))
+    generic = _on_the_generic_stage(prob)
     kw = {"dt": 0.05, "n_steps": 60, "progress": False}
     fused = iso.solve(prob, method, w0, **kw)
     particles = iso.solve(generic, method, w0, **kw)

@@ -377,6 +377,16 @@ class ElementwiseLinear(Kernel):
         return U @ (self.coeff * (Uh @ Wa @ U)) @ Uh
 
 
+def _finite_real(value: Any, what: str) -> float:
+    """``value`` as a float, if it is a finite real number (not a bool); else a
+    :class:`ParameterError` naming :class:`SpinNeighbourSum`'s parameter ``what``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ParameterError(f"SpinNeighbourSum: {what} must be a real number, got {value!r}")
+    if not np.isfinite(value):
+        raise ParameterError(f"SpinNeighbourSum: {what} must be finite, got {value!r}")
+    return float(value)
+
+
 @dataclass(frozen=True)
 class SpinNeighbourSum(Kernel):
     r"""``B_i(w) = c\,(w_{i-1} + w_{i+1})`` on :math:`(\mathbb{R}^3,\times)^N`, periodic, with
@@ -404,18 +414,11 @@ class SpinNeighbourSum(Kernel):
     name = "SpinNeighbourSum"
 
     def __post_init__(self) -> None:
-        c = self.coupling
-        if isinstance(c, bool) or not isinstance(c, (int, float, np.integer, np.floating)):
-            raise ParameterError(f"SpinNeighbourSum: coupling must be a real number, got {c!r}")
-        if not np.isfinite(c):
-            raise ParameterError(f"SpinNeighbourSum: coupling must be finite, got {c!r}")
-        object.__setattr__(self, "coupling", float(c))
-        lam = self.damping
-        if isinstance(lam, bool) or not isinstance(lam, (int, float, np.integer, np.floating)):
-            raise ParameterError(f"SpinNeighbourSum: damping must be a real number, got {lam!r}")
-        if not (np.isfinite(lam) and lam >= 0):
-            raise ParameterError(f"SpinNeighbourSum: damping must be finite and >= 0, got {lam!r}")
-        object.__setattr__(self, "damping", float(lam) + 0.0)  # -0.0 becomes 0.0
+        object.__setattr__(self, "coupling", _finite_real(self.coupling, "coupling"))
+        lam = _finite_real(self.damping, "damping")
+        if lam < 0:
+            raise ParameterError(f"SpinNeighbourSum: damping must be >= 0, got {lam!r}")
+        object.__setattr__(self, "damping", lam + 0.0)  # -0.0 becomes 0.0
 
     def field(self) -> tuple[Callable[..., None], tuple[Any, ...]]:
         from . import _kernel_fields as kf
