@@ -153,9 +153,9 @@ def drawn_together(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     taken: list[int] = []
     original = compiled_runner.CompiledRunner._start_draws
 
-    def counting(self, pool, helpers, k0, nsteps):  # type: ignore[no-untyped-def]
+    def counting(self, pool, k0, nsteps):  # type: ignore[no-untyped-def]
         taken.append(nsteps)
-        return original(self, pool, helpers, k0, nsteps)
+        return original(self, pool, k0, nsteps)
 
     monkeypatch.setattr(compiled_runner.CompiledRunner, "_start_draws", counting)
     return taken

@@ -478,49 +478,49 @@ class CompiledRunner(Runner):
         return how_to_draw(
             nsteps=nsteps, values_per_step=self._step_values,
             serial_loop=not self.parallel and not self.layout.threaded,
-            numba_threads=_threads() - self.threads_beside, blas_threads=blas_threads(),
+            numba_threads=self._draw_threads(), blas_threads=blas_threads(),
         )  # fmt: skip
 
-    def _draw_helpers(self) -> int:
-        """Helper threads that draw step data: the numba threads but the caller's and those
-        the run keeps busy beside the loop (:attr:`threads_beside`)."""
-        return _threads() - 1 - self.threads_beside
+    def _draw_threads(self) -> int:
+        """Threads that may draw step data, the caller's included: the numba threads but
+        those the run keeps busy beside the loop (:attr:`threads_beside`)."""
+        return _threads() - self.threads_beside
 
-    def _start_draws(self, pool: Any, helpers: int, k0: int, nsteps: int) -> StepDraws:
-        """The step data of the steps ``k0 + 1 .. k0 + nsteps`` (all members), ``helpers``
-        threads of ``pool`` drawing it from now on (:class:`~isoflow._compiled.draws_ahead.
-        StepDraws`; its ``result()`` draws the rest on this thread)."""
+    def _start_draws(self, pool: Any, k0: int, nsteps: int) -> StepDraws:
+        """The step data of the steps ``k0 + 1 .. k0 + nsteps`` (all members), every thread
+        of ``pool`` (:meth:`_draw_pool`) drawing it from now on (:class:`~isoflow._compiled.
+        draws_ahead.StepDraws`; its ``result()`` draws the rest on this thread)."""
         everyone = slice(None)
         draws = StepDraws(lambda k, n: self._step_data(k, n, everyone), k0, nsteps)
-        for _ in range(helpers):
+        for _ in range(self._draw_threads() - 1):
             pool.submit(draws.help)
         return draws
 
     def _draw_pool(self) -> Any:
-        """A pool of :meth:`_draw_helpers` threads for one chunk (a pool kept across chunks
-        would not survive a ``fork`` of the process)."""
+        """The helper threads that draw beside the caller (:meth:`_draw_threads` less one),
+        for one chunk (a pool kept across chunks would not survive a ``fork`` of the
+        process)."""
         from concurrent.futures import ThreadPoolExecutor
 
-        return ThreadPoolExecutor(self._draw_helpers(), thread_name_prefix="isoflow-draws")
+        return ThreadPoolExecutor(self._draw_threads() - 1, thread_name_prefix="isoflow-draws")
 
     def _call_in_pieces(self, nsteps: int, grid: SaveGrid, buf: Array) -> None:
         """The chunk's steps in :func:`~isoflow._compiled.draws_ahead.pieces`, each piece's
         step data drawn by helper threads while the loop runs the piece before (and by this
         thread too once the loop is done: :class:`~isoflow._compiled.draws_ahead.StepDraws`)."""
         everyone = slice(None)
-        helpers = self._draw_helpers()
         sizes = pieces(nsteps)
         k0 = self.k
         row = 0
         try:
             with self._draw_pool() as pool:
-                data = self._start_draws(pool, helpers, k0, sizes[0]).result()
+                data = self._start_draws(pool, k0, sizes[0]).result()
                 ahead: StepDraws | None = None
                 try:
                     for j, n in enumerate(sizes):
                         ahead = None
                         if j + 1 < len(sizes):
-                            ahead = self._start_draws(pool, helpers, k0 + n, sizes[j + 1])
+                            ahead = self._start_draws(pool, k0 + n, sizes[j + 1])
                         r = grid.count(k0, k0 + n)
                         self.rec[:, driver.REC_CALL_DONE] = 0.0
                         self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
@@ -551,7 +551,7 @@ class CompiledRunner(Runner):
                 data = None
                 if how == "together":
                     with self._draw_pool() as pool:
-                        draws = self._start_draws(pool, self._draw_helpers(), self.k, nsteps)
+                        draws = self._start_draws(pool, self.k, nsteps)
                         data = draws.result()
                 self._call(self._args(everyone, nsteps, self.k, grid, buf, data))
         except Exception as exc:  # the field raised (a parallel driver says SystemError)
