@@ -270,3 +270,47 @@ def test_vector_isomp_ensemble_matches_single_runs():
     for k in range(4):
         single = iso.solve(prob, iso.IsoMP(), W0[k], dt=0.1, n_steps=10, diagnostics=False)
         assert np.abs(sol.y_final[k] - single.y_final).max() <= 1e-13
+
+
+# ---- the closed-form stage on (R^3, x)^N ---------------------------------------------------------
+@given(vecs, vecs, st.floats(0.01, 2.0))
+def test_so3_closed_form_stage_solves_the_stage_equation(b, w, h):
+    # X solves hat(w) = (I - h/2 hat b) hat(X) (I + h/2 hat b) for the given field, the finish
+    # w + h C is IsoMP's update (I + h/2 hat b) hat(X) (I - h/2 hat b), a rotation of w
+    alg = iso.algebras.so3_vectors(4)
+    assert alg.closed_form_stage
+    X, C = alg.solve_stage(w, b, h)
+    I3 = np.eye(3)
+    M = I3 - 0.5 * h * hat(b)
+    tol = 1e-12 * _scale(w) * _scale(h * b) ** 2
+    assert np.allclose(M @ hat(X) @ np.swapaxes(M, -1, -2), hat(w), atol=tol)
+    assert np.allclose(C, np.cross(b, X), atol=1e-12 * _scale(b, X) ** 2)
+    update = np.swapaxes(M, -1, -2) @ hat(X) @ M
+    assert np.allclose(hat(w + h * C), update, atol=tol)
+    n0, n1 = np.linalg.norm(w, axis=-1), np.linalg.norm(w + h * C, axis=-1)
+    assert np.all(np.abs(n1 - n0) <= 4e-15 * _scale(w))
+
+
+def test_so3_closed_form_stage_jvp_is_its_derivative():
+    alg = iso.algebras.so3_vectors(5)
+    rng = np.random.default_rng(3)
+    W, B, dB = (rng.standard_normal((2, 5, 3)) for _ in range(3))
+    h, eps = 0.7, 1e-6
+    fd = (alg.solve_stage(W, B + eps * dB, h)[0] - alg.solve_stage(W, B - eps * dB, h)[0]) / (
+        2 * eps
+    )
+    assert np.abs(alg.solve_stage_jvp(W, B, dB, h) - fd).max() <= 1e-8
+
+
+def test_a_space_that_changes_the_products_keeps_the_plain_map():
+    # a subclass with other products (here the printed sign) is not the space the closed form
+    # is derived from; matrix spaces have none
+    class Printed(iso.algebras.SpinVectors):
+        def bracket_and_triple(self, B, X):
+            C, T = super().bracket_and_triple(B, X)
+            return C, -T
+
+    assert not Printed(3).closed_form_stage
+    assert not iso.algebras.so(3).closed_form_stage
+    with pytest.raises(NotImplementedError, match="no closed-form stage"):
+        iso.algebras.so(3).solve_stage(np.zeros((3, 3)), np.zeros((3, 3)), 0.1)

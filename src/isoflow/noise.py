@@ -451,7 +451,7 @@ class TransportNoise:
         if self.site is not None:
             from .algebras import SpinVectors
 
-            if type(algebra) is not SpinVectors:
+            if not isinstance(algebra, SpinVectors):
                 raise InvalidBError(
                     f"TransportNoise: site noise acts on (R^3, x)^N, not on {algebra.name}"
                 )

@@ -27,6 +27,15 @@ The blocks (a layout provides those its stages need; the stage registry checks t
     :math:`G = \Pi(W + a C + b T)` onto the stage space; ``rr[q] = |G - X|^2`` per lane.
 ``stage_update1(lay, W, a, C, G, X, rr)``
     The same without ``T``: :math:`G = \Pi(W + a C)`.
+``stage_map(lay, W, h, B, X, G, C, T, rr)``
+    IsoMP's stage map for the field ``B``: ``G`` and the bracket ``C`` the step's finish adds
+    (:math:`W_{k+1} = \Pi_V(W + h C)`), ``T`` scratch, ``rr[q] = |G - X|^2``. Generic
+    (:func:`provide_generic_stage_map`): ``C = [B, X]``, ``T = B X B`` and
+    :math:`G = \Pi(W + \tfrac h2 C + \tfrac{h^2}{4} T)`. On :math:`(\mathbb{R}^3,\times)^N`
+    the stage of each particle for a given field is solved in closed form
+    (:func:`isoflow._compiled.particles.so3_stage`): :math:`g_i = (w_i + u_i \times w_i) /
+    (1 + |u_i|^2)`, :math:`u_i = \tfrac h2 b_i`, and ``C_i = b_i x g_i``, so that the finish
+    rotates every ``w_i``.
 ``advance_state(lay, W, h, C, E, Wn, fin)``
     :math:`W_n = \Pi_V(W + h C)` (exact mirrors stay exact); ``fin[q]`` whether lane ``q`` is
     finite. With a compensation ``E`` (a buffer of the state's size; size 0: none) the sum is
@@ -89,10 +98,12 @@ __all__ = [
     "lane_sumsq",
     "lanes",
     "provide",
+    "provide_generic_stage_map",
     "provide_member_defaults",
     "provided",
     "select_lanes",
     "spherical_point",
+    "stage_map",
     "stage_update",
     "stage_update1",
     "store",
@@ -177,6 +188,13 @@ def stage_update(lay: Any, W: Any, a: Any, C: Any, b: Any, T: Any, G: Any, X: An
 def stage_update1(lay: Any, W: Any, a: Any, C: Any, G: Any, X: Any, rr: Any) -> None:
     """``G = Pi(W + a C)``, ``rr[q] = |G - X|^2``."""
     raise _stub("stage_update1")
+
+
+@_block
+def stage_map(lay: Any, W: Any, h: Any, B: Any, X: Any, G: Any, C: Any, T: Any, rr: Any) -> None:
+    """IsoMP's stage map for the field ``B``: ``G``, the finish's bracket ``C`` and
+    ``rr[q] = |G - X|^2`` (``T`` scratch)."""
+    raise _stub("stage_map")
 
 
 @_block
@@ -292,3 +310,16 @@ def provide_member_defaults(*layouts: type) -> None:
         (store, _member_store),
     ):
         provide(block, *layouts)(impl)
+
+
+@numba.njit(cache=True, inline="always")
+def _generic_stage_map(lay, W, h, B, X, G, C, T, rr):  # type: ignore[no-untyped-def]
+    """``C = [B, X]``, ``T = B X B``, ``G = Pi(W + h/2 C + h^2/4 T)``: the layout's own
+    :func:`bracket_triple` and :func:`stage_update`."""
+    bracket_triple(lay, B, X, C, T)
+    stage_update(lay, W, 0.5 * h, C, 0.25 * h * h, T, G, X, rr)
+
+
+def provide_generic_stage_map(*layouts: type) -> None:
+    """:func:`stage_map` from the layouts' :func:`bracket_triple` and :func:`stage_update`."""
+    provide(stage_map, *layouts)(_generic_stage_map)

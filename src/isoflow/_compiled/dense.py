@@ -311,6 +311,7 @@ blocks.provide(blocks.bracket_triple, DenseSmall)(_bracket_triple_small)
 blocks.provide(blocks.bracket, DenseSmall)(_bracket_small)
 blocks.provide(blocks.bracket_triple, DenseBlas)(_bracket_triple_blas)
 blocks.provide(blocks.bracket, DenseBlas)(_bracket_blas)
+blocks.provide_generic_stage_map(DenseSmall, DenseBlas)
 blocks.provide_member_defaults(DenseSmall, DenseBlas)
 
 

@@ -240,6 +240,7 @@ for _block, _impl in (
     (blocks.store, _store),
 ):
     blocks.provide(_block, ElementwiseLanes)(_impl)
+blocks.provide_generic_stage_map(ElementwiseLanes)
 
 
 def to_lanes(A: NDArray[Any], units: int) -> NDArray[Any]:

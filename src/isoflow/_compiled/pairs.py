@@ -282,6 +282,7 @@ blocks.provide(blocks.bracket, TopPair)(_top_bracket)
 blocks.provide(blocks.stage_update, TopPair)(flat_stage_update)
 blocks.provide(blocks.stage_update1, TopPair)(flat_stage_update1)
 blocks.provide(blocks.advance_state, TopPair)(flat_advance_state)
+blocks.provide_generic_stage_map(PairsSmall, PairsBlas, TopPair)
 blocks.provide_member_defaults(PairsSmall, PairsBlas, TopPair)
 
 

@@ -43,6 +43,7 @@ __all__ = [
     "sl2_forms",
     "so3_cayley",
     "so3_forms",
+    "so3_stage",
     "spherical_factor",
 ]
 
@@ -83,6 +84,31 @@ def so3_cayley(b0, b1, b2, w0, w1, w2, half):  # type: ignore[no-untyped-def]
         k * (c1 + (u2 * c0 - u0 * c2)),
         k * (c2 + (u0 * c1 - u1 * c0)),
     )
+
+
+@numba.njit(cache=True, inline="always")
+def so3_stage(b0, b1, b2, w0, w1, w2, half):  # type: ignore[no-untyped-def]
+    r"""IsoMP's stage of one particle on :math:`(\mathbb{R}^3,\times)` for the field ``b``, in
+    closed form, and the bracket the finish adds: ``(g, b x g)``.
+
+    The stage equation :math:`w = (I - \hat u)\,\hat g\,(I + \hat u)`, :math:`u = \tfrac h2 b`
+    (``half`` is :math:`\tfrac h2`), reads :math:`w = g - u \times g + (u \cdot g)\, u` in
+    vector form, a linear map whose inverse is :math:`(I + \hat u) / (1 + |u|^2)`:
+
+    .. math::
+
+        g = \frac{w + u \times w}{1 + |u|^2}, \qquad
+        w + h\, b \times g = w + \frac{2}{1 + |u|^2}\,\big(u \times w + u \times (u \times w)\big),
+
+    the Cayley rotation of ``w`` (:func:`so3_cayley`): whatever ``b``, the step's finish
+    :math:`w + h\,b \times g` keeps :math:`|w|`."""
+    u0, u1, u2 = half * b0, half * b1, half * b2
+    # numpy's division: no zero check (``1 + |u|^2 >= 1``), which would keep loops scalar
+    k = np.divide(1.0, 1.0 + (u0 * u0 + u1 * u1 + u2 * u2))
+    g0 = k * (w0 + (u1 * w2 - u2 * w1))
+    g1 = k * (w1 + (u2 * w0 - u0 * w2))
+    g2 = k * (w2 + (u0 * w1 - u1 * w0))
+    return g0, g1, g2, b1 * g2 - b2 * g1, b2 * g0 - b0 * g2, b0 * g1 - b1 * g0
 
 
 @numba.njit(cache=True, inline="always")
@@ -177,6 +203,26 @@ def so3_cayley_increment(lay, B, W, h, D):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
+def so3_stage_map(lay, W, h, B, X, G, C, T, rr):  # type: ignore[no-untyped-def]
+    """The stage of every particle for the field ``B`` in closed form (:func:`so3_stage`);
+    ``C_i = b_i x g_i``; ``T`` is not used."""
+    half = 0.5 * h
+    acc = 0.0
+    for i in range(lay.N):
+        j = 3 * i
+        g0, g1, g2, c0, c1, c2 = so3_stage(B[j], B[j + 1], B[j + 2], W[j], W[j + 1], W[j + 2],
+                                           half)  # fmt: skip
+        acc += (g0 - X[j]) ** 2 + (g1 - X[j + 1]) ** 2 + (g2 - X[j + 2]) ** 2  # X before G
+        G[j] = g0
+        G[j + 1] = g1
+        G[j + 2] = g2
+        C[j] = c0
+        C[j + 1] = c1
+        C[j + 2] = c2
+    rr[0] = acc
+
+
+@numba.njit(cache=True, inline="always")
 def flat_stage_update(lay, W, a, C, b, T, G, X, rr):  # type: ignore[no-untyped-def]
     """``G = W + a C + b T`` (no projection: every real array is in the space)."""
     acc = 0.0
@@ -238,9 +284,11 @@ def provide_particle_blocks(so3: tuple[type, ...], sl2: tuple[type, ...]) -> Non
         blocks.provide(blocks.bracket, cls)(so3_bracket)
         blocks.provide(blocks.spherical_point, cls)(so3_spherical_point)
         blocks.provide(blocks.cayley_increment, cls)(so3_cayley_increment)
+        blocks.provide(blocks.stage_map, cls)(so3_stage_map)
     for cls in sl2:
         blocks.provide(blocks.bracket_triple, cls)(sl2_bracket_triple)
         blocks.provide(blocks.bracket, cls)(sl2_bracket)
+    blocks.provide_generic_stage_map(*sl2)
     blocks.provide_member_defaults(*so3, *sl2)
 
 

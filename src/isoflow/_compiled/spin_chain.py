@@ -48,6 +48,7 @@ from .particles import (
     flat_stage_update1,
     so3_cayley,
     so3_forms,
+    so3_stage,
     spherical_factor,
 )
 
@@ -176,21 +177,19 @@ def _coupling_typed(lay):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _iso_one(X, W, G, N, i, im, ip, c, half, quarter):  # type: ignore[no-untyped-def]
+def _iso_one(X, W, G, N, i, im, ip, c, half):  # type: ignore[no-untyped-def]
     b0, b1, b2 = _b(X, N, c, i, im, ip)
-    return _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter)
+    return _iso_at(X, W, G, N, i, b0, b1, b2, half)
 
 
 @numba.njit(cache=True, inline="always")
-def _iso_at(X, W, G, N, i, b0, b1, b2, half, quarter):  # type: ignore[no-untyped-def]
-    """IsoMP's stage map at spin ``i`` with its ``B_i = (b0, b1, b2)``; the squared change."""
+def _iso_at(X, W, G, N, i, b0, b1, b2, half):  # type: ignore[no-untyped-def]
+    """IsoMP's stage of spin ``i`` for its ``B_i = (b0, b1, b2)`` in closed form
+    (:func:`~isoflow._compiled.particles.so3_stage`); the squared change from ``X_i``."""
     n, k = _U(N), _U(i)  # unsigned: no negative-index wraparound, the loops vectorize
     n2 = n + n
-    x0, x1, x2 = X[k], X[n + k], X[n2 + k]
-    d = -(b0 * x0 + b1 * x1 + b2 * x2)
-    g0 = W[k] + half * (b1 * x2 - b2 * x1) + quarter * (d * b0)
-    g1 = W[n + k] + half * (b2 * x0 - b0 * x2) + quarter * (d * b1)
-    g2 = W[n2 + k] + half * (b0 * x1 - b1 * x0) + quarter * (d * b2)
+    x0, x1, x2 = X[k], X[n + k], X[n2 + k]  # read before G is written: else no vectorizing
+    g0, g1, g2, _, _, _ = so3_stage(b0, b1, b2, W[k], W[n + k], W[n2 + k], half)
     G[k] = g0
     G[n + k] = g1
     G[n2 + k] = g2
@@ -259,10 +258,10 @@ def _blocked(block, lo, hi, r, args):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, fastmath=_STATE)
-def _iso_block(lo, hi, r, X, W, G, N, c, half, quarter):  # type: ignore[no-untyped-def]
+def _iso_block(lo, hi, r, X, W, G, N, c, half):  # type: ignore[no-untyped-def]
     """IsoMP's sweep over the spins ``lo <= i < hi``, squared changes into ``r``."""
     for i in range(lo, hi):
-        r[i - lo] = _iso_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter)
+        r[i - lo] = _iso_one(X, W, G, N, i, i - 1, i + 1, c, half)
 
 
 @numba.njit(cache=True, fastmath=_STATE)
@@ -290,11 +289,10 @@ def iterate_iso_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     N = lay.N
     c = _coupling(lay)
     half = 0.5 * hp
-    quarter = 0.25 * hp * hp
-    acc = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter)
+    acc = _iso_one(X, W, G, N, 0, N - 1, 1 % N, c, half)
     if N > 1:
-        acc += _blocked(_iso_block, 1, N - 1, work[0], (X, W, G, N, c, half, quarter))
-        acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
+        acc += _blocked(_iso_block, 1, N - 1, work[0], (X, W, G, N, c, half))
+        acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half)
     rr[0] = acc
 
 
@@ -305,7 +303,6 @@ def iterate_iso_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     c = _coupling(lay)
     nch = lay.nch
     half = 0.5 * hp
-    quarter = 0.25 * hp * hp
     size = (N + nch - 1) // nch
     part = np.zeros(nch)
     for ch in numba.prange(nch):
@@ -313,10 +310,10 @@ def iterate_iso_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
             r = _buffer(work[0], ch, nch)
-            part[ch] = _blocked(_iso_block, lo, hi, r, (X, W, G, N, c, half, quarter))
+            part[ch] = _blocked(_iso_block, lo, hi, r, (X, W, G, N, c, half))
     acc = part.sum()
-    acc += _iso_one(X, W, G, N, 0, N - 1, 1, c, half, quarter)
-    acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter)
+    acc += _iso_one(X, W, G, N, 0, N - 1, 1, c, half)
+    acc += _iso_one(X, W, G, N, N - 1, N - 2, 0, c, half)
     rr[0] = acc
 
 
@@ -364,9 +361,9 @@ def iterate_smm_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
 
 
 @numba.njit(cache=True, inline="always")
-def _final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
-    """``Wn_i = W_i + h B_i x Y_i``, compensated by ``E`` (TwoSum; no reassociation, which
-    would simplify its exact error away)."""
+def _bracket_final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
+    """``Wn_i = W_i + h B_i(Y) x Y_i``, compensated by ``E`` (TwoSum; no reassociation, which
+    would simplify its exact error away): the spherical midpoint's finish at its points."""
     n, k = _U(N), _U(i)
     n2 = n + n
     y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
@@ -376,18 +373,79 @@ def _final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
     Wn[n2 + k], E[n2 + k] = two_sum(W[n2 + k], h * (b0 * y1 - b1 * y0) + E[n2 + k])
 
 
+@numba.njit(cache=True, inline="always")
+def _bracket_final_at(Y, W, Wn, N, i, b0, b1, b2, h):  # type: ignore[no-untyped-def]
+    """``Wn_i = W_i + h B_i x Y_i`` with ``B_i = (b0, b1, b2)``."""
+    n, k = _U(N), _U(i)
+    n2 = n + n
+    y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
+    Wn[k] = W[k] + h * (b1 * y2 - b2 * y1)
+    Wn[n + k] = W[n + k] + h * (b2 * y0 - b0 * y2)
+    Wn[n2 + k] = W[n2 + k] + h * (b0 * y1 - b1 * y0)
+
+
+@numba.njit(cache=True, inline="always")
+def _stage_final_one(Y, W, Wn, E, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
+    """``Wn_i = W_i + h b_i x g_i`` (:func:`_stage_final_at`) with ``b_i = B_i(Y)``,
+    compensated by ``E`` as :func:`_bracket_final_one`."""
+    n, k = _U(N), _U(i)
+    n2 = n + n
+    b0, b1, b2 = _b(Y, N, c, i, im, ip)
+    _, _, _, c0, c1, c2 = so3_stage(b0, b1, b2, W[k], W[n + k], W[n2 + k], 0.5 * h)
+    Wn[k], E[k] = two_sum(W[k], h * c0 + E[k])
+    Wn[n + k], E[n + k] = two_sum(W[n + k], h * c1 + E[n + k])
+    Wn[n2 + k], E[n2 + k] = two_sum(W[n2 + k], h * c2 + E[n2 + k])
+
+
+@numba.njit(cache=True, inline="always")
+def _stage_final_at(Y, W, Wn, N, i, b0, b1, b2, h):  # type: ignore[no-untyped-def]
+    """``Wn_i = W_i + h b_i x g_i`` with ``b_i = (b0, b1, b2)`` the field of the accepted
+    stage ``Y`` and ``g_i`` the stage of that field
+    (:func:`~isoflow._compiled.particles.so3_stage`, as the last sweep formed it): the
+    rotation of ``W_i`` that the generic particle stage's finish applies (``Y`` is not read)."""
+    n, k = _U(N), _U(i)
+    n2 = n + n
+    _, _, _, c0, c1, c2 = so3_stage(b0, b1, b2, W[k], W[n + k], W[n2 + k], 0.5 * h)
+    Wn[k] = W[k] + h * c0
+    Wn[n + k] = W[n + k] + h * c1
+    Wn[n2 + k] = W[n2 + k] + h * c2
+
+
+@numba.njit(cache=True, inline="always")
+def _final_loops(one, at, Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
+    """Every spin's finish: ``one`` (compensated by ``E``) or ``at`` (``E`` empty) per spin,
+    the interior in a loop of its own with no reduction and no wrapped neighbours, which
+    vectorizes without reassociation. The finiteness check is a pass of its own
+    (:func:`_size`): at N = 1e6 this loop takes 6.4 ns a spin and the check 1.1, against 8.5
+    for one loop with the sum (compiled with reassociation)."""
+    if E.shape[0] != 0:
+        one(Y, W, Wn, E, N, 0, N - 1, 1 % N, c, h)
+        for i in range(1, N - 1):
+            one(Y, W, Wn, E, N, i, i - 1, i + 1, c, h)
+        if N > 1:
+            one(Y, W, Wn, E, N, N - 1, N - 2, 0, c, h)
+    else:
+        b0, b1, b2 = _b(Y, N, c, 0, N - 1, 1 % N)
+        at(Y, W, Wn, N, 0, b0, b1, b2, h)
+        for i in range(1, N - 1):
+            b0, b1, b2 = _b(Y, N, c, i, i - 1, i + 1)
+            at(Y, W, Wn, N, i, b0, b1, b2, h)
+        if N > 1:
+            b0, b1, b2 = _b(Y, N, c, N - 1, N - 2, 0)
+            at(Y, W, Wn, N, N - 1, b0, b1, b2, h)
+
+
 @numba.njit(cache=True, fastmath=_STATE)
-def _final_compensated(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
-    """:func:`_final_one` for every spin: the interior in a loop of its own with no
-    reduction and no wrapped neighbours, which vectorizes without reassociation. The
-    finiteness check is a pass of its own (:func:`_size`): at N = 1e6 this loop takes 6.4 ns
-    a spin and the check 1.1, against 8.5 for one loop with the sum (compiled with
-    reassociation)."""
-    _final_one(Y, W, Wn, E, N, 0, N - 1, 1 % N, c, h)
-    for i in range(1, N - 1):
-        _final_one(Y, W, Wn, E, N, i, i - 1, i + 1, c, h)
-    if N > 1:
-        _final_one(Y, W, Wn, E, N, N - 1, N - 2, 0, c, h)
+def _bracket_final(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(Y) x Y`` (flat ``(3, N)``), compensated by ``E`` unless it is empty."""
+    _final_loops(_bracket_final_one, _bracket_final_at, Y, W, Wn, E, N, c, h)
+
+
+@numba.njit(cache=True, fastmath=_STATE)
+def _stage_final(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
+    """``Wn = W + h B(Y) x G`` with the closed-form stage ``G`` of the field ``B(Y)``,
+    compensated by ``E`` unless it is empty."""
+    _final_loops(_stage_final_one, _stage_final_at, Y, W, Wn, E, N, c, h)
 
 
 @numba.njit(cache=True, fastmath=_REDUCE)
@@ -400,58 +458,19 @@ def _size(V):  # type: ignore[no-untyped-def]
     return acc
 
 
-@numba.njit(cache=True, fastmath=_STATE)
-def _final_plain(Y, W, Wn, N, c, h):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B(Y) x Y`` without compensation (the finiteness check is :func:`_size`'s
-    pass, as for :func:`_final_compensated`)."""
-    _final_at_b(Y, W, Wn, N, 0, N - 1, 1 % N, c, h)
-    for i in range(1, N - 1):
-        _final_at_b(Y, W, Wn, N, i, i - 1, i + 1, c, h)
-    if N > 1:
-        _final_at_b(Y, W, Wn, N, N - 1, N - 2, 0, c, h)
-
-
-@numba.njit(cache=True, inline="always")
-def _final_at_b(Y, W, Wn, N, i, im, ip, c, h):  # type: ignore[no-untyped-def]
-    b0, b1, b2 = _b(Y, N, c, i, im, ip)
-    _final_at(Y, W, Wn, N, i, b0, b1, b2, h)
-
-
-@numba.njit(cache=True)
-def _final(Y, W, Wn, E, N, c, h):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B(Y) x Y`` (flat ``(3, N)``), compensated by ``E`` unless it is empty;
-    returns a sum that is finite iff every entry of ``Wn`` is."""
-    if E.shape[0] != 0:
-        _final_compensated(Y, W, Wn, E, N, c, h)
-    else:
-        _final_plain(Y, W, Wn, N, c, h)
-    return _size(Wn)
-
-
-@numba.njit(cache=True, inline="always")
-def _final_at(Y, W, Wn, N, i, b0, b1, b2, h):  # type: ignore[no-untyped-def]
-    """``Wn_i = W_i + h B_i x Y_i`` with ``B_i = (b0, b1, b2)``."""
-    n, k = _U(N), _U(i)
-    n2 = n + n
-    y0, y1, y2 = Y[k], Y[n + k], Y[n2 + k]
-    v0 = W[k] + h * (b1 * y2 - b2 * y1)
-    v1 = W[n + k] + h * (b2 * y0 - b0 * y2)
-    v2 = W[n2 + k] + h * (b0 * y1 - b1 * y0)
-    Wn[k] = v0
-    Wn[n + k] = v1
-    Wn[n2 + k] = v2
-
-
 @numba.njit(cache=True)
 def finish_iso(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B(X) x X`` from the accepted ``X`` (the bracket of its last evaluation)."""
-    fin[0] = math.isfinite(_final(X, W, Wn, E, lay.N, _coupling(lay), hp))
+    """``Wn = W + h B(X) x G(X)`` from the accepted ``X`` (``B`` and the stage ``G`` of its
+    last sweep, formed again)."""
+    _stage_final(X, W, Wn, E, lay.N, _coupling(lay), hp)
+    fin[0] = math.isfinite(_size(Wn))
 
 
 @numba.njit(cache=True)
 def finish_smm(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = W + h B(m) x m`` with the points ``m`` of the last iteration (``work[0]``)."""
-    fin[0] = math.isfinite(_final(work[0], W, Wn, E, lay.N, _coupling(lay), hp))
+    _bracket_final(work[0], W, Wn, E, lay.N, _coupling(lay), hp)
+    fin[0] = math.isfinite(_size(Wn))
 
 
 def isomp_sweeps(layout: Layout) -> tuple[Any, Any]:
@@ -483,18 +502,18 @@ def _noise_of(T, N, i):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _sto_one(X, W, G, N, i, im, ip, c, half, quarter, T):  # type: ignore[no-untyped-def]
+def _sto_one(X, W, G, N, i, im, ip, c, half, T):  # type: ignore[no-untyped-def]
     b0, b1, b2 = _b(X, N, c, i, im, ip)
     n0, n1, n2 = _noise_of(T, N, i)
-    return _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half, quarter)
+    return _iso_at(X, W, G, N, i, b0 + n0, b1 + n1, b2 + n2, half)
 
 
 @numba.njit(cache=True, fastmath=_STATE)
-def _sto_block(lo, hi, r, X, W, G, N, c, half, quarter, T):  # type: ignore[no-untyped-def]
+def _sto_block(lo, hi, r, X, W, G, N, c, half, T):  # type: ignore[no-untyped-def]
     """The stochastic sweep over the interior spins ``lo <= i < hi``, squared changes into
     ``r``."""
     for i in range(lo, hi):
-        r[i - lo] = _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, quarter, T)
+        r[i - lo] = _sto_one(X, W, G, N, i, i - 1, i + 1, c, half, T)
 
 
 @numba.njit(cache=True)
@@ -504,13 +523,12 @@ def iterate_sto_ser(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     N = lay.N
     c = _coupling(lay)
     half = 0.5 * hp
-    quarter = 0.25 * hp * hp
     T = work[work.shape[0] - 1]
-    acc = _sto_one(X, W, G, N, 0, N - 1, 1 % N, c, half, quarter, T)
+    acc = _sto_one(X, W, G, N, 0, N - 1, 1 % N, c, half, T)
     if N > 1:
-        args = (X, W, G, N, c, half, quarter, T)
+        args = (X, W, G, N, c, half, T)
         acc += _blocked(_sto_block, 1, N - 1, work[0], args)
-        acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, T)
+        acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, T)
     rr[0] = acc
 
 
@@ -521,7 +539,6 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     c = _coupling(lay)
     nch = lay.nch
     half = 0.5 * hp
-    quarter = 0.25 * hp * hp
     T = work[work.shape[0] - 1]
     size = (N + nch - 1) // nch
     part = np.zeros(nch)
@@ -530,28 +547,28 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
         hi = min((ch + 1) * size, N - 1)
         if lo < hi:
             r = _buffer(work[0], ch, nch)
-            args = (X, W, G, N, c, half, quarter, T)
+            args = (X, W, G, N, c, half, T)
             part[ch] = _blocked(_sto_block, lo, hi, r, args)
     acc = part.sum()
-    acc += _sto_one(X, W, G, N, 0, N - 1, 1, c, half, quarter, T)
-    acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, quarter, T)
+    acc += _sto_one(X, W, G, N, 0, N - 1, 1, c, half, T)
+    acc += _sto_one(X, W, G, N, N - 1, N - 2, 0, c, half, T)
     rr[0] = acc
 
 
 @numba.njit(cache=True, fastmath=_STATE)
 def _final_sto(X, W, Wn, N, c, hp, T):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B~(X) x X``, the step's noise term ``T`` in ``B~``."""
+    """``Wn = W + h B~(X) x G(X)``, the step's noise term ``T`` in ``B~``."""
     for i in range(N):
         im = i - 1 if i > 0 else N - 1
         ip = i + 1 if i < N - 1 else 0
         b0, b1, b2 = _b(X, N, c, i, im, ip)
         n0, n1, n2 = _noise_of(T, N, i)
-        _final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
+        _stage_final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
 
 
 @numba.njit(cache=True)
 def finish_sto(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B~(X) x X`` from the accepted ``X``, the step's noise in ``B~`` (not
+    """``Wn = W + h B~(X) x G(X)`` from the accepted ``X``, the step's noise in ``B~`` (not
     compensated: ``E`` is empty)."""
     _final_sto(X, W, Wn, lay.N, _coupling(lay), hp, work[work.shape[0] - 1])
     fin[0] = math.isfinite(_size(Wn))
@@ -610,7 +627,7 @@ def _cayley_one(X, W, Wn, E, N, i, im, ip, c, half, noise):  # type: ignore[no-u
 @numba.njit(cache=True, fastmath=_STATE)
 def _cayley_final(X, W, Wn, E, N, c, hp):  # type: ignore[no-untyped-def]
     """The Cayley finish without noise: the interior in loops of their own (no wrapped
-    neighbours, no branch), which vectorize, as :func:`_final_compensated`."""
+    neighbours, no branch), which vectorize, as :func:`_final_loops`."""
     half = 0.5 * hp
     zero = (0.0, 0.0, 0.0)
     _cayley_one(X, W, Wn, E, N, 0, N - 1, 1 % N, c, half, zero)
@@ -714,6 +731,26 @@ def _bracket(lay, B, X, C):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
+def _stage_map(lay, W, h, B, X, G, C, T, rr):  # type: ignore[no-untyped-def]
+    """The closed-form stage of every spin (:func:`~isoflow._compiled.particles.so3_stage`)
+    on the ``(3, N)`` layout; ``T`` is not used."""
+    N = lay.N
+    half = 0.5 * h
+    acc = 0.0
+    for i in range(N):
+        g0, g1, g2, c0, c1, c2 = so3_stage(B[i], B[N + i], B[2 * N + i], W[i], W[N + i],
+                                           W[2 * N + i], half)  # fmt: skip
+        acc += (g0 - X[i]) ** 2 + (g1 - X[N + i]) ** 2 + (g2 - X[2 * N + i]) ** 2  # X before G
+        G[i] = g0
+        G[N + i] = g1
+        G[2 * N + i] = g2
+        C[i] = c0
+        C[N + i] = c1
+        C[2 * N + i] = c2
+    rr[0] = acc
+
+
+@numba.njit(cache=True, inline="always")
 def _spherical_point(lay, W, M, mid):  # type: ignore[no-untyped-def]
     _point_range(M, W, mid, lay.N, 0, lay.N)
 
@@ -722,6 +759,7 @@ blocks.provide(blocks.evaluate_B, *CHAIN_RECORDS)(_evaluate_B)
 blocks.provide(blocks.cayley_increment, *CHAIN_RECORDS)(_cayley_increment)
 blocks.provide(blocks.bracket_triple, *CHAIN_RECORDS)(_bracket_triple)
 blocks.provide(blocks.bracket, *CHAIN_RECORDS)(_bracket)
+blocks.provide(blocks.stage_map, *CHAIN_RECORDS)(_stage_map)
 blocks.provide(blocks.spherical_point, *CHAIN_RECORDS)(_spherical_point)
 blocks.provide(blocks.stage_update, *CHAIN_RECORDS)(flat_stage_update)
 blocks.provide(blocks.stage_update1, *CHAIN_RECORDS)(flat_stage_update1)

@@ -101,6 +101,47 @@ class Algebra(ABC):
         Both results lie in ``V`` (up to rounding for the triple product; callers project).
         """
 
+    #: Whether :meth:`solve_stage` gives IsoMP's stage for a given field in closed form.
+    closed_form_stage: bool = False
+
+    def solve_stage(self, W: Array, B: Array, h: float) -> tuple[Array, Array]:
+        r"""IsoMP's stage for a given field in closed form, on spaces with
+        :attr:`closed_form_stage`.
+
+        The ``X`` with :math:`W = (I - \tfrac h2 B)\, X\, (I + \tfrac h2 B)` for a fixed ``B``,
+        and the bracket ``C`` the step's finish adds, :math:`W_{k+1} = W + h C`. IsoMP then
+        iterates :math:`X \leftarrow X(B(X))` instead of the plain map: the same fixed point.
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, *shape)
+            The step's state.
+        B : ndarray, shape (*batch, *shape)
+            The field.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        X, C : ndarray
+
+        Raises
+        ------
+        NotImplementedError
+            On spaces without a closed form.
+        """
+        raise NotImplementedError(f"{self.name} has no closed-form stage")
+
+    def solve_stage_jvp(self, W: Array, B: Array, dB: Array, h: float) -> Array:
+        """The derivative of :meth:`solve_stage`'s ``X`` along ``dB`` (for Newton's method).
+
+        Raises
+        ------
+        NotImplementedError
+            On spaces without :meth:`solve_stage`.
+        """
+        raise NotImplementedError(f"{self.name} has no closed-form stage")
+
     @abstractmethod
     def casimirs(self, W: Array) -> Array:
         """Invariants of every isospectral flow on ``V``, shape ``(*batch, m)``.

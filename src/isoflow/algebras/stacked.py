@@ -78,6 +78,16 @@ class Stacked(Algebra):
     def bracket_and_triple(self, B: Array, X: Array) -> tuple[Array, Array]:
         return self.base.bracket_and_triple(B, X)
 
+    @property
+    def closed_form_stage(self) -> bool:  # type: ignore[override]
+        return self.base.closed_form_stage
+
+    def solve_stage(self, W: Array, B: Array, h: float) -> tuple[Array, Array]:
+        return self.base.solve_stage(W, B, h)
+
+    def solve_stage_jvp(self, W: Array, B: Array, dB: Array, h: float) -> Array:
+        return self.base.solve_stage_jvp(W, B, dB, h)
+
     def casimirs(self, W: Array) -> Array:
         """The Casimirs of the copies, one after the other, shape ``(*batch, copies * m)``.
 

@@ -23,6 +23,29 @@ method on ``so(n)``, ``u(n)``, ... and the compact forms on :math:`(\mathbb{R}^3
 :math:`\mathfrak{sl}(2,\mathbb{R})`. Every iterate is projected onto the stage space (``V``, or
 ``u(n)`` for ``su(n)``) and ``W_{k+1}`` onto ``V``, so rounding cannot push the state off ``V``.
 
+Particles: the stage in closed form
+-----------------------------------
+On :math:`(\mathbb{R}^3,\times)^N` (spins, vortices on the sphere; the space's
+:meth:`~isoflow.algebras.Algebra.solve_stage`) the stage equation of particle ``i`` for a
+*given* field is linear: with :math:`u_i = \tfrac h2 b_i`,
+:math:`w_i = x_i - u_i \times x_i + (u_i \cdot x_i)\, u_i`, whose inverse is
+:math:`(I + \hat u_i)/(1 + |u_i|^2)`. The iteration is then
+
+.. math::
+
+    X \leftarrow g(B(X)), \qquad g_i(b) = \frac{w_i + u_i \times w_i}{1 + |u_i|^2},
+
+with the same fixed point as :math:`G`, and the step ends with
+:math:`w_i + h\, b_i \times g_i`, where ``b`` and ``g`` are the last iteration's: the Cayley
+rotation of :math:`w_i` by :math:`u_i`, so every :math:`|w_i|` is kept to rounding whatever
+the tolerance. The plain map contracts at about :math:`\tfrac12 \|h B\|` from the particle's
+own rotation plus what comes from how ``B`` depends on ``X``; this one at the second part
+alone. On spin chains and lattices, where ``B_i`` depends on the neighbours (and through a
+Gilbert term, weakly, on ``x_i``), that is a quarter to a third fewer iterations a step, and
+about 40% fewer with site noise, whose increments enter the particle's own rotation
+(``docs/user_guide/solvers.rst`` has the measurements); on point vortices, whose field
+depends on each vortex through its distances, about the same number.
+
 Compensated summation
 ---------------------
 The update :math:`W_{k+1} = W_k + hC` adds an increment far smaller than the state: rounded
@@ -165,8 +188,10 @@ class IsoMP(Method):
         ``q`` of offsets (:func:`state_parts`).
     update : {"midpoint", "cayley"}
         How the step ends: ``"midpoint"`` (default), :math:`W_{k+1} = W_k + h[B(X), X]`,
-        isospectral to the stage's residual; ``"cayley"``, :math:`W_{k+1} = C W_k
-        C^\dagger` with the Cayley factor of ``B(X)`` (the module docstring), isospectral to
+        isospectral to the stage's residual (on :math:`(\mathbb{R}^3,\times)^N` to rounding:
+        the stage is solved per particle in closed form, see the module docstring);
+        ``"cayley"``, :math:`W_{k+1} = C W_k C^\dagger` with the Cayley factor of ``B(X)``
+        (the module docstring), isospectral to
         rounding whatever the solver's tolerance, for a looser tolerance and fewer
         iterations (the default solver's is then ``1e-8``). Dense matrix spaces (``so``,
         ``u``, ``su``, ``sym``, ``herm``) and particles on :math:`(\mathbb{R}^3,\times)^N`
@@ -251,6 +276,7 @@ class IsoMP(Method):
         alg = problem.algebra
         stage_alg = alg.stage_algebra
         half, quarter = 0.5 * h, 0.25 * h * h
+        closed = alg.closed_form_stage
 
         def field_at(X: Array, mask: Array | None) -> Array:
             B = problem.evaluate_B(X)
@@ -258,11 +284,21 @@ class IsoMP(Method):
 
         def G(X: Array, mask: Array | None) -> tuple[Array, Array]:
             Wm = W if mask is None else W[mask]
-            C, T = alg.bracket_and_triple(field_at(X, mask), X)
+            B = field_at(X, mask)
+            if closed:  # the stage for this field in closed form
+                return alg.solve_stage(Wm, B, h)
+            C, T = alg.bracket_and_triple(B, X)
             return stage_alg.project(Wm + half * C + quarter * T), C
 
         jvp = None
-        if problem.B_jvp is not None:
+        if problem.B_jvp is not None and closed:
+
+            def jvp(X: Array, dX: Array, mask: Array | None) -> Array:
+                Wm = W if mask is None else W[mask]
+                dB = problem.evaluate_B_jvp(X, dX)
+                return alg.solve_stage_jvp(Wm, field_at(X, mask), dB, h)
+
+        elif problem.B_jvp is not None:
 
             def jvp(X: Array, dX: Array, mask: Array | None) -> Array:
                 B = field_at(X, mask)

@@ -251,7 +251,7 @@ register(
         "IsoMP",
         isomp.iterate,
         isomp.finish,
-        frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
+        frozenset({"evaluate_B", "stage_map", "advance_state"}),
         isomp.NWORK,
         offsets=_isomp_offsets,
         compensated=lambda method: bool(method.compensated),
@@ -300,7 +300,7 @@ def _with_cayley_finish(
     }
     if chain is not None:
         specializations |= _on_chains(chain)
-    needs = {"evaluate_B", "bracket_triple", "stage_update", "advance_state"}
+    needs = {"evaluate_B", "stage_map", "advance_state"}
     needs.add("cayley_increment" if blocks_finish is not None else "(BLAS layout only)")
     return dataclasses.replace(
         stage,
@@ -361,7 +361,7 @@ register(
         "Strang split",
         isomp.iterate,
         split.finish,
-        frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
+        frozenset({"evaluate_B", "stage_map", "advance_state"}),
         isomp.NWORK,
         offsets=lambda method, problem: _isomp_offsets(method.base, problem),
         params=split.params,
@@ -395,7 +395,7 @@ register(
         "stochastic IsoMP",
         stochastic_isomp.iterate,
         isomp.finish,
-        frozenset({"evaluate_B", "bracket_triple", "stage_update", "advance_state"}),
+        frozenset({"evaluate_B", "stage_map", "advance_state"}),
         stochastic_isomp.NWORK,
         params=stochastic_isomp.noise_params,
         begin=stochastic_isomp.begin,

@@ -8,8 +8,13 @@ One fixed-point iteration for the stage ``X`` of a step of size ``h``
     G(X) = \Pi\big(W + \tfrac h2 [B, X] + \tfrac{h^2}{4} B X B\big), \qquad
     W_{k+1} = \Pi_V\big(W + h [B, X]\big)
 
-with ``[B, X]`` of the accepted ``X`` (kept in ``aux`` by the last iteration). Two scratch rows:
-``B`` and ``B X B``. Named specializations: the BLAS tiles on large dense states
+with ``[B, X]`` of the accepted ``X`` (kept in ``aux`` by the last iteration): the layout's
+:func:`~isoflow._compiled.blocks.stage_map`. On :math:`(\mathbb{R}^3,\times)^N` that block solves
+each particle's stage for the field of the iterate in closed form,
+:math:`g_i = (w_i + u_i \times w_i)/(1 + |u_i|^2)`, :math:`u_i = \tfrac h2 b_i` (the same fixed
+point, fewer iterations: the particle's own linear part no longer slows the iteration), and the
+finish adds :math:`h\, b_i \times g_i`, a rotation of :math:`w_i`. Two scratch rows: ``B`` and
+``B X B``. Named specializations: the BLAS tiles on large dense states
 (:mod:`isoflow._compiled.dense_tiles`, benchmarks 3, 10, 12) and the fused sweeps on spin chains
 (:mod:`isoflow._compiled.spin_chain`, benchmarks 4, 5).
 """
@@ -28,12 +33,12 @@ NWORK = 2
 
 @numba.njit(cache=True)
 def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[no-untyped-def]
-    """``G = G(X)``; ``aux = [B(X), X]``; ``rr`` the squared residuals per lane."""
+    r"""``G = G(X)``; ``aux`` the bracket the finish adds (``[B(X), X]``, or per particle
+    ``B_i x G_i`` on :math:`(\mathbb{R}^3,\times)^N`); ``rr`` the squared residuals per lane."""
     B = work[0]
     T = work[1]
     blocks.evaluate_B(lay, f, fargs, X, B)
-    blocks.bracket_triple(lay, B, X, aux, T)
-    blocks.stage_update(lay, W, 0.5 * h, aux, 0.25 * h * h, T, G, X, rr)
+    blocks.stage_map(lay, W, h, B, X, G, aux, T, rr)
 
 
 @numba.njit(cache=True)

@@ -94,13 +94,13 @@ def _add_term(work, B):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, h, rr):  # type: ignore[no-untyped-def]
-    """``G = G(X)`` with the step's noise; ``aux = [B~(X), X]``; ``rr`` per lane."""
+    """``G = G(X)`` with the step's noise (the layout's stage map for ``B~``); ``aux`` the
+    bracket the finish adds; ``rr`` per lane."""
     B = work[0]
     T = work[1]
     blocks.evaluate_B(lay, f, fargs, X, B)
     _add_term(work, B)
-    blocks.bracket_triple(lay, B, X, aux, T)
-    blocks.stage_update(lay, W, 0.5 * h, aux, 0.25 * h * h, T, G, X, rr)
+    blocks.stage_map(lay, W, h, B, X, G, aux, T, rr)
 
 
 @numba.njit(cache=True)
