@@ -78,7 +78,7 @@ def so3_cayley(b0, b1, b2, w0, w1, w2, half):  # type: ignore[no-untyped-def]
     without the cancellation of ``C w - w``. ``C`` is a rotation, so ``|w|`` is kept."""
     u0, u1, u2 = half * b0, half * b1, half * b2
     c0, c1, c2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
-    k = 2.0 / (1.0 + (u0 * u0 + u1 * u1 + u2 * u2))
+    k = np.divide(2.0, 1.0 + (u0 * u0 + u1 * u1 + u2 * u2))  # no zero check: see so3_stage
     return (
         k * (c0 + (u1 * c2 - u2 * c1)),
         k * (c1 + (u2 * c0 - u0 * c2)),

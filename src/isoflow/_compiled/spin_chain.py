@@ -555,15 +555,22 @@ def iterate_sto_par(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type:
     rr[0] = acc
 
 
+@numba.njit(cache=True, inline="always")
+def _final_sto_one(X, W, Wn, N, i, im, ip, c, hp, T):  # type: ignore[no-untyped-def]
+    b0, b1, b2 = _b(X, N, c, i, im, ip)
+    n0, n1, n2 = _noise_of(T, N, i)
+    _stage_final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
+
+
 @numba.njit(cache=True, fastmath=_STATE)
 def _final_sto(X, W, Wn, N, c, hp, T):  # type: ignore[no-untyped-def]
-    """``Wn = W + h B~(X) x G(X)``, the step's noise term ``T`` in ``B~``."""
-    for i in range(N):
-        im = i - 1 if i > 0 else N - 1
-        ip = i + 1 if i < N - 1 else 0
-        b0, b1, b2 = _b(X, N, c, i, im, ip)
-        n0, n1, n2 = _noise_of(T, N, i)
-        _stage_final_at(X, W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, hp)
+    """``Wn = W + h B~(X) x G(X)``, the step's noise term ``T`` in ``B~`` (the interior in a
+    loop of its own, as :func:`_final_loops`)."""
+    _final_sto_one(X, W, Wn, N, 0, N - 1, 1 % N, c, hp, T)
+    for i in range(1, N - 1):
+        _final_sto_one(X, W, Wn, N, i, i - 1, i + 1, c, hp, T)
+    if N > 1:
+        _final_sto_one(X, W, Wn, N, N - 1, N - 2, 0, c, hp, T)
 
 
 @numba.njit(cache=True)
@@ -645,12 +652,22 @@ def _cayley_final(X, W, Wn, E, N, c, hp):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, fastmath=_STATE)
 def _cayley_final_sto(X, W, Wn, E, N, c, hp, T):  # type: ignore[no-untyped-def]
-    """The Cayley finish with the step's noise term ``T`` in ``B~`` (as :func:`_final_sto`)."""
+    """The Cayley finish with the step's noise term ``T`` in ``B~`` (as :func:`_final_sto`),
+    the interior in loops of their own as :func:`_cayley_final`."""
     half = 0.5 * hp
-    for i in range(N):
-        im = i - 1 if i > 0 else N - 1
-        ip = i + 1 if i < N - 1 else 0
-        _cayley_one(X, W, Wn, E, N, i, im, ip, c, half, _noise_of(T, N, i))
+    _cayley_one(X, W, Wn, E, N, 0, N - 1, 1 % N, c, half, _noise_of(T, N, 0))
+    if E.shape[0] != 0:
+        for i in range(1, N - 1):
+            b0, b1, b2 = _b(X, N, c, i, i - 1, i + 1)
+            n0, n1, n2 = _noise_of(T, N, i)
+            _cayley_at(W, Wn, E, N, i, b0 + n0, b1 + n1, b2 + n2, half)
+    else:
+        for i in range(1, N - 1):
+            b0, b1, b2 = _b(X, N, c, i, i - 1, i + 1)
+            n0, n1, n2 = _noise_of(T, N, i)
+            _cayley_plain_at(W, Wn, N, i, b0 + n0, b1 + n1, b2 + n2, half)
+    if N > 1:
+        _cayley_one(X, W, Wn, E, N, N - 1, N - 2, 0, c, half, _noise_of(T, N, N - 1))
 
 
 @numba.njit(cache=True)
