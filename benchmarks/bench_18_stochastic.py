@@ -20,6 +20,11 @@ stochastic / IsoMP <= 1.3 per step. Run alone: ``python benchmarks/bench_18_stoc
 Each case runs twice: with the default update and with ``update="cayley"`` (rows marked
 "Cayley update"; stage tolerance 1e-8, every Casimir kept to rounding on every path).
 
+**Missed** again at 21:55 UTC after each spin's stage came to be solved in closed form (the
+solvers guide): the chain 1.53 (8.9 against 5.8 ms a step; 12 iterations against IsoMP's 10,
+from 17 and 14), with the Cayley update 1.50 (8.0 ms, 7 iterations); the step still waits on
+its normals (6.7 ms timed alone). The ensemble (so(10), not spins) 7.79 and 5.58, as below.
+
 **Missed** (idle machine, 2026-11-27 18:59 UTC, ``python benchmarks/run_all.py --only 18``):
 
 * spin chain: 2.40 (stochastic 7.4 ms a step, IsoMP 3.1 ms; 17 and 14 iterations), with the

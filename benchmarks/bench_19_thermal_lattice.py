@@ -18,6 +18,14 @@ the Cayley update, 1.40 (8.5 against 6.0 ms, 10 iterations). The ``3 * 65536`` n
 step (4.0-4.5 ms timed alone) are drawn on a second thread while the loop runs
 (:mod:`isoflow._compiled.draws_ahead`): before, the rows read 2.62 and 1.83 in a run of the
 same day.
+
+Again at 21:41 UTC, after each spin's stage came to be solved in closed form (the solvers
+guide): **missed** with the default update, 1.76 (12.7 against 7.2 ms a step: 12 iterations
+against IsoMP's 9, which gained too, from 11), **met** with the Cayley update, 1.28 (9.2 ms, 7
+iterations). Site noise no longer slows the iteration (it enters the spin's own rotation,
+which the closed form solves); what is left is a stochastic step's start from the state
+against IsoMP's extrapolated one (11 iterations from the state) and the noise term and Gilbert
+term read in each.
 """
 
 from __future__ import annotations

@@ -28,9 +28,13 @@ midpoint), ``STEPS_SPINS`` steps, the update with ``rtol = 1e-8`` against the de
 time ratio (target below 1), the iterations, and the largest change of any ``|S_i|`` of the
 Cayley runs (target: rounding, below 1e-13). The chains run on the chain's fused sweeps (the
 thermal one since its damping became :class:`isoflow.SpinNeighbourSum`'s), the lattices on
-the generic particle stage. The thermal chain's two updates take about the same time a step
-(0.98 on 2026-11-27 at 19:05 UTC, 11.7 and 11.9 ms with 12 and 22 iterations): its sweeps are
-cheap, and both wait on the step's ``3 x 10^5`` normals (benchmark 18).
+the generic particle stage. Since each spin's stage is solved in closed form (2026-11-27, the
+solvers guide) the two updates are the same rotation and differ by their tolerances; the
+default takes fewer iterations than before (the chain 10.2 a step against 14.2, the thermal
+lattice 11.6 against 18.4). Idle machine, 21:55-21:59 UTC: 0.74, 0.59, 0.84 and 0.75 (the
+thermal chain read 1.19 and 1.24 in two runs before its Cayley finish stopped checking every
+division for zero and ran the interior spins in a loop of its own: 450 against 5100 us a
+finish over 10^5 spins; it waits on the step's ``3 x 10^5`` normals, benchmark 18).
 
 Run alone: ``python benchmarks/bench_22_cayley_update.py``.
 """

@@ -20,6 +20,15 @@ benchmark's ratios in alternating runs (N = 1e2, 1e4, 1e6, 1e7), before: 2.10 1.
 2.01 0.79 1.18 1.70, 2.35 0.94 1.69 1.92; after: 2.34 0.96 1.48 2.08, 3.41 1.11 1.71 2.09,
 3.90 1.21 2.10 2.48 (2 cores shared with other work: the spread of one code is as wide as the
 difference). Run alone: ``python benchmarks/bench_4_spin_chain_bandwidth.py``.
+
+Since each spin's stage is solved in closed form (2026-11-27, ``docs/user_guide/solvers.rst``)
+a step takes fewer iterations (10.3 against 14.35 at N = 1e6), each of which carries a larger
+share of the step's own work (the start, the compensated finish: about 2.35 ms at N = 1e5 on
+one thread, fitted from runs at three tolerances, in the code before and after alike; the
+iteration itself 320-344 against 317-322 us). Idle machine, the same hour, this host's triad
+bandwidth 27 GB/s (37 in earlier runs): 1.62 and 2.41 at N = 1e6, 1e7, the commit before 1.33
+and 2.10, while a step took 0.86-0.88 of its time (64.5 against 75.0 ns a spin-step at 1e6,
+126-128 against 141-145 at 1e7, alternating processes).
 """
 
 from __future__ import annotations
