@@ -104,10 +104,9 @@ particle and the factor is the rotation :math:`C_i = I + \tfrac{2}{1 + |u_i|^2}(
 :math:`w_{k+1} - w_k = \tfrac{2}{1 + |u_i|^2}(u_i \times w_i + u_i \times (u_i \times w_i))`:
 a few flops a particle, which keeps every :math:`|w_i|` (a spin's length, a vortex on its
 sphere) to rounding. With the stage in closed form (above) the midpoint update is this same
-rotation, by the field of the last iteration instead of the accepted stage's: on these spaces
-the two updates differ by the stage's residual only, and ``update="cayley"`` is the default
-update with a looser default tolerance (``1e-8``: about half the iterations a step,
-benchmark 22).
+rotation by the same field, written another way (the two differ in rounding only), so on these
+spaces ``update="cayley"`` is the default update with a looser default tolerance (``1e-8``:
+about half the iterations a step, benchmark 22).
 """
 
 from __future__ import annotations
