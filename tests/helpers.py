@@ -169,7 +169,7 @@ def check_cayley_keeps_lengths(
     ``dt = 0.05``: at ``rtol = 1e-6`` every ``|w_i|`` stays to 1e-14 over ``n_steps`` steps,
     and so it does with the midpoint update after the closed-form stage, while the plain map's
     midpoint update moves them by more than 1e-10; at ``rtol = 1e-14`` it is the midpoint
-    update (the method's default) to 1e-12 over ``n_short`` steps; the compiled finish equals
+    update (``solver=FixedPoint()``) to 1e-12 over ``n_short`` steps; the compiled finish equals
     the NumPy path's to 1e-12."""
 
     def cayley(rtol: float) -> Any:
@@ -187,8 +187,8 @@ def check_cayley_keeps_lengths(
     assert length_drift(cay.ys, y0) < 1e-14
     short = dict(kw, n_steps=n_short)
     tight = iso.solve(prob, cayley(1e-14), y0, **short)
-    default = iso.solve(prob, method(), y0, **short)
-    assert np.max(np.abs(tight.ys - default.ys)) <= 1e-12
+    midpoint = iso.solve(prob, method(solver=iso.FixedPoint()), y0, **short)
+    assert np.max(np.abs(tight.ys - midpoint.ys)) <= 1e-12
     numpy_path = iso.solve(dataclasses.replace(prob, kernel=None), cayley(1e-8), y0, **short)
     fast = iso.solve(prob, cayley(1e-8), y0, **short)
     assert numpy_path.stats.runner == "NumPy"

@@ -277,6 +277,7 @@ def step(
         If the new state is not finite.
     """
     _check_objects(problem, method)
+    method = method.for_problem(problem)
     h = _real(h, "h", StepSizeError)
     if h == 0:
         raise StepSizeError("h must be finite and nonzero, got 0.0")
@@ -375,6 +376,7 @@ def solve(
         The writer failed (disk full, ...): the file holds the run up to its last checkpoint.
     """
     _check_objects(problem, method, writer)
+    method = method.for_problem(problem)  # what the run's file records
     _check_save_every(save_every)
     _check_status_every(status_every)
     _check_flags(progress, throw)

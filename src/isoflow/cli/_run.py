@@ -86,7 +86,8 @@ def add_parser(sub: Any) -> None:
     run.add_argument(
         "--rtol",
         type=positive_float,
-        help="nonlinear solver tolerance (default 1e-14; 1e-8 for the *-cayley methods)",
+        help="nonlinear solver tolerance (default 1e-14; 1e-8 for the *-cayley methods and "
+        "for stochastic-isomp on spins and vortices with noise)",
     )
     run.add_argument(
         "--anderson",

@@ -220,6 +220,7 @@ def resume(
             config, meta = o.config, o.meta
             needs_rewrite = o.version < 2 or o.flagged
             problem, method = _rebuild(p, config, meta, problem, method, model, params)
+            method = method.for_problem(problem)  # as the run's start settled it
             t0, dt = float(meta["t0"]), float(meta["dt"])
             n_steps, save_every = int(meta["n_steps"]), int(meta["save_every"])
             if tuple(np.shape(cp.y)) != tuple(meta["state_shape"]):

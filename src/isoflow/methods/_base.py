@@ -160,6 +160,25 @@ class Method:
         """
         raise NotImplementedError  # pragma: no cover
 
+    def for_problem(self, problem: IsospectralProblem) -> Method:
+        """This method with the defaults that depend on the problem settled (default: itself).
+
+        The time loop calls it once when a run starts or resumes, and records the result's
+        settings in the run's file; e.g. :meth:`isoflow.StochasticIsoMP.for_problem` loosens
+        its default stage tolerance where the step keeps every Casimir whatever the tolerance.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem the run integrates.
+
+        Returns
+        -------
+        Method
+            A method of the same class (``self`` when nothing depends on the problem).
+        """
+        return self
+
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:
         """Initial method state (default: none).
 

@@ -45,13 +45,19 @@ equations, :math:`W_{k+1} = (I + \tfrac12\tilde B)(I - \tfrac12\tilde B)^{-1} W_
 by the stage's error, far below the method's own (strong order 1/2): the default tolerance is
 ``1e-8`` (:data:`~isoflow.methods.isomp.CAYLEY_RTOL`), about half the iterations. The finish costs
 one inverse and two products (:func:`~isoflow.methods.isomp.cayley_increment`).
+
+**Spins and vortices.** On :math:`(\mathbb{R}^3,\times)^N` each particle's stage is solved in
+closed form for the field of the iterate and both updates rotate every :math:`w_i` by the same
+Cayley factor (:class:`isoflow.algebras.SpinVectors`), so the lengths are kept whatever the
+tolerance: there the default tolerance with noise is ``1e-8`` for either update
+(:meth:`StochasticIsoMP.for_problem`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -60,11 +66,17 @@ from numpy.typing import NDArray
 from .._errors import ParameterError
 from ..algebras import Algebra
 from ..noise import TRANSPORT_STREAM, TransportNoise, brownian_increments, check_truncation
-from ..nonlinear import NonlinearSolver
+from ..nonlinear import FixedPoint, NonlinearSolver
 from ..problems import IsospectralProblem
 from ..splitting import has_split_part
 from ._base import Method, StepDataRequest, StepResult, check_implicit_options
-from .isomp import IsoMP, cayley_increment, check_update_space, update_solver
+from .isomp import (
+    CAYLEY_RTOL,
+    IsoMP,
+    cayley_increment,
+    check_update_space,
+    update_solver,
+)
 
 __all__ = ["StochasticIsoMP"]
 
@@ -77,10 +89,15 @@ class StochasticIsoMP(Method):
 
     Parameters
     ----------
-    solver : FixedPoint or Newton
+    solver : FixedPoint or Newton, optional
         Nonlinear solver for the stage (as :class:`~isoflow.IsoMP`). Each solve starts from the
         state: the stage offsets of a noisy path are not smooth in time, so IsoMP's
-        extrapolated guess does not apply.
+        extrapolated guess does not apply. Default: ``FixedPoint()`` (tolerance ``1e-14``),
+        and ``FixedPoint(rtol=1e-8)`` (:data:`~isoflow.methods.isomp.CAYLEY_RTOL`) wherever
+        the step keeps every Casimir whatever the tolerance: with ``update="cayley"``, and on
+        :math:`(\mathbb{R}^3,\times)^N` with noise (thermal spins, stochastic point vortices),
+        where each particle's stage is solved in closed form for the field of the iterate and
+        the step rotates every :math:`w_i` (:meth:`for_problem`, the module docstring).
     truncation : float or None
         ``k`` of the truncated increments :math:`\sqrt h\,\zeta`, :math:`|\zeta| \le A_h =
         \sqrt{2k|\ln h|}` (default 2: strong order 1/2 and weak order 1 kept); ``None`` draws
@@ -120,6 +137,8 @@ class StochasticIsoMP(Method):
     truncation: float | None = 2.0
     substeps: int = 1
     update: Literal["midpoint", "cayley"] = "midpoint"
+    #: Whether ``solver`` was left to its default (which :meth:`for_problem` may loosen).
+    _default_solver: bool = field(default=False, init=False, repr=False)
 
     order: ClassVar[int] = 1
     implicit: ClassVar[bool] = True
@@ -128,6 +147,7 @@ class StochasticIsoMP(Method):
     integrates_noise: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "_default_solver", self.solver is None)
         solver = update_solver("StochasticIsoMP", self.update, self.solver)
         object.__setattr__(self, "solver", solver)
         check_implicit_options(self.solver, "state")
@@ -139,6 +159,34 @@ class StochasticIsoMP(Method):
         """``"stochastic IsoMP"``, or ``"stochastic IsoMP (Cayley update)"`` with
         ``update="cayley"``."""
         return "stochastic IsoMP" + ("" if self.update == "midpoint" else " (Cayley update)")
+
+    def for_problem(self, problem: IsospectralProblem) -> StochasticIsoMP:
+        r"""With the default solver, on :math:`(\mathbb{R}^3,\times)^N` with noise: the same
+        method with ``FixedPoint(rtol=CAYLEY_RTOL)`` (``1e-8``); else ``self``.
+
+        There each particle's stage is solved in closed form for the field of the iterate
+        (:attr:`isoflow.algebras.Algebra.closed_form_stage`) and the step rotates every
+        :math:`w_i` by the Cayley factor of that field, so every :math:`|w_i|` is kept to
+        rounding whatever the stage's error, as with the Cayley update; the stage's error then
+        only moves the step, orders of magnitude below the method's own (strong order 1/2).
+        Without noise the step is IsoMP's from the state, tolerance included, bit for bit.
+
+        Parameters
+        ----------
+        problem : IsospectralProblem
+            The problem the run integrates.
+
+        Returns
+        -------
+        StochasticIsoMP
+        """
+        if not self._default_solver or self.update != "midpoint":
+            return self
+        noise = problem.noise
+        alg = problem.algebra
+        if noise is None or noise.dimension(alg) == 0 or not alg.closed_form_stage:
+            return self
+        return dataclasses.replace(self, solver=FixedPoint(rtol=CAYLEY_RTOL))
 
     @property
     def deterministic(self) -> IsoMP:

@@ -15,6 +15,7 @@ and the member alone.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -114,6 +115,12 @@ class Strang(Method):
     def solver(self) -> Any:
         """The base method's nonlinear solver (``None`` for an explicit base)."""
         return getattr(self.base, "solver", None)
+
+    def for_problem(self, problem: IsospectralProblem) -> Strang:
+        """The split step of the base's :meth:`~isoflow.Method.for_problem` (``self`` when
+        the base settles nothing)."""
+        base = self.base.for_problem(problem)
+        return self if base is self.base else dataclasses.replace(self, base=base)
 
     # ---- stepping -----------------------------------------------------------------------------
     def init(self, problem: IsospectralProblem, y0: Array, h: float) -> Any:

@@ -243,12 +243,11 @@ def build(
             )
         model = MODELS[cfg["model"]]
     problem, y0 = model.make(cfg["params"])
-    if METHODS[cfg["method"]].implicit:
-        solver: NonlinearSolver | None = make_solver(
-            cfg["solver"], rtol=cfg["rtol"], anderson=cfg.get("anderson", 0)
-        )
-    else:
-        solver = None
+    spec = METHODS[cfg["method"]]
+    solver: NonlinearSolver | None = None  # explicit, or the method's default for the problem
+    defaults = cfg.get("solver") == "fixed-point" and cfg.get("rtol") is None
+    if spec.implicit and not (spec.solver_by_problem and defaults and not cfg.get("anderson")):
+        solver = make_solver(cfg["solver"], rtol=cfg["rtol"], anderson=cfg.get("anderson", 0))
     method = make_method(cfg["method"], solver)
     if has_split_part(problem):  # dissipation or forcing: the method runs as a split step
         method = split_method(method, problem)

@@ -96,7 +96,7 @@ SOLVERS: dict[str, SolverSpec] = {
 
 @dataclass(frozen=True)
 class MethodSpec:
-    """A time-stepping method: ``make(solver)``; ``implicit`` methods take a solver.
+    r"""A time-stepping method: ``make(solver)``; ``implicit`` methods take a solver.
 
     Parameters
     ----------
@@ -112,6 +112,11 @@ class MethodSpec:
         The solver tolerance a configuration without ``rtol`` gets (default ``None``: the
         solver's own; ``1e-8`` for ``isomp-cayley`` and ``stochastic-isomp-cayley``, whose update
         keeps the spectrum whatever the tolerance).
+    solver_by_problem : bool
+        Whether the method's default solver depends on the problem
+        (:meth:`isoflow.Method.for_problem`): a configuration that sets no solver option
+        (solver, ``rtol``, ``anderson``) then hands it none (``stochastic-isomp``: ``1e-8``
+        with noise on :math:`(\mathbb{R}^3,\times)^N`, else ``1e-14``).
     """
 
     name: str
@@ -119,6 +124,7 @@ class MethodSpec:
     description: str
     implicit: bool = True
     default_rtol: float | None = None
+    solver_by_problem: bool = False
 
 
 def _composed(base: Callable[..., Method], scheme: str) -> Callable[[Any], Method]:
@@ -153,7 +159,9 @@ METHODS: dict[str, MethodSpec] = {
     "stochastic-isomp": MethodSpec(
         "stochastic-isomp",
         _plain(StochasticIsoMP),
-        "stochastic isospectral midpoint (models with noise or a temperature)",
+        "stochastic isospectral midpoint (models with noise or a temperature; default rtol "
+        "1e-8 on spins and vortices, where it keeps |w_i| at any tolerance)",
+        solver_by_problem=True,
     ),
     "stochastic-isomp-cayley": MethodSpec(
         "stochastic-isomp-cayley",
@@ -220,11 +228,15 @@ def make_solver(
 
 
 def make_method(name: str, solver: NonlinearSolver | None = None) -> Method:
-    """The method called ``name`` (:data:`METHODS`) with ``solver`` (default: fixed point)."""
+    """The method called ``name`` (:data:`METHODS`) with ``solver`` (default: fixed point, or
+    the method's own default when it depends on the problem, :attr:`MethodSpec.
+    solver_by_problem`)."""
     spec = METHODS[choice(name, METHODS, "method")]
     if not spec.implicit:
         if solver is not None:
             raise ConfigError(f"method {name!r} is explicit: it takes no nonlinear solver")
+        return spec.make(None)
+    if solver is None and spec.solver_by_problem:
         return spec.make(None)
     return spec.make(solver if solver is not None else FixedPoint())
 
