@@ -20,6 +20,14 @@ stochastic / IsoMP <= 1.3 per step. Run alone: ``python benchmarks/bench_18_stoc
 Each case runs twice: with the default update and with ``update="cayley"`` (rows marked
 "Cayley update"; stage tolerance 1e-8, every Casimir kept to rounding on every path).
 
+**Missed** again at 23:47 UTC after the stochastic midpoint's default stage tolerance on spins
+with noise became ``1e-8`` (:meth:`isoflow.StochasticIsoMP.for_problem`; this benchmark's step
+timer now settles the method as a solve does): the chain 1.50 (7.9 against 5.3 ms a step; 7
+iterations against IsoMP's 10), with the Cayley update 1.38 (7.1 ms; in the run before, 1.35):
+the step waits on its ``3 x 10^5`` normals (6.9 ms timed alone, drawn on a second thread while
+the loop runs on both cores), so the two updates differ by their finishes only. The ensemble
+(so(10), not spins) 7.68 and 5.63, as below.
+
 **Missed** again at 21:55 UTC after each spin's stage came to be solved in closed form (the
 solvers guide): the chain 1.53 (8.9 against 5.8 ms a step; 12 iterations against IsoMP's 10,
 from 17 and 14), with the Cayley update 1.50 (8.0 ms, 7 iterations); the step still waits on

@@ -284,6 +284,7 @@ class StepTimer:
         from isoflow._stepping import PythonRunner
 
         y = np.asarray(y, dtype=problem.algebra.dtype)
+        method = method.for_problem(problem)  # the method a solve of the run steps with
         if compiled:
             runner = compiled_runner(problem, method, y, h)
             if runner is None:
