@@ -131,6 +131,41 @@ def test_a_thermal_run_records_its_settled_tolerance_and_resumes_only_with_it(tm
         assert method.for_problem(problem).solver.rtol == rtol, extra
 
 
+def test_a_run_begun_at_the_old_default_resumes_from_its_file_at_that_tolerance(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    # A thermal chain run through the command line's configuration without rtol, as the
+    # previous version recorded it (settings at 1e-14): killed at a write, resumed from the file
+    # alone (what `isoflow run --resume` does), it continues at 1e-14, bit for bit with the
+    # uninterrupted run; the default method given by hand is refused (its tolerance is 1e-8)
+    import json
+
+    import h5py
+
+    from helpers import disk_before_each_write
+    from isoflow import io, registry
+
+    cfg = registry.normalize_config({
+        "model": "spin-chain", "method": "stochastic-isomp", "rtol": 1e-14, "dt": 0.05,
+        "n_steps": 40, "save_every": 2,
+        "params": {"N": 30, "temperature": 0.5, "damping": 0.1, "noise_seed": 4},
+    })  # fmt: skip
+    problem, y0, method, kw = registry.build(cfg)
+    full = tmp_path / "full.h5"
+    with disk_before_each_write(full) as copies:
+        iso.solve(problem, method, y0, **kw, progress=False,
+                  writer=io.HDF5Writer(full, dict(cfg, rtol=None), chunk_rows=2,
+                                       flush_seconds=0.0))  # fmt: skip
+    path = tmp_path / "old.h5"
+    path.write_bytes(copies[len(copies) // 2])
+    with h5py.File(full, "r") as f:  # the killed copy's header is the same
+        assert json.loads(f.attrs["config"])["rtol"] is None
+        assert json.loads(f.attrs["meta"])["method_settings"]["solver.rtol"] == 1e-14
+    assert 0 < io.load(path).step < 40
+    with pytest.raises(iso.ResultFileError, match=r"solver\.rtol: 1e-14 -> 1e-08"):
+        io.resume(path, problem=problem, method=iso.StochasticIsoMP(), progress=False)
+    io.resume(path, progress=False)
+    assert io.load(path).ys.tobytes() == io.load(full).ys.tobytes()
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [

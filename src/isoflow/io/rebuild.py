@@ -57,9 +57,27 @@ def rebuild_run(
         cfg = check_recorded_model(config, model, params)
     else:
         cfg = normalize_config(config)
-    problem, y0, method, _kwargs = build(cfg, model=model)
+    problem, y0, method, _kwargs = build(_recorded_tolerance(cfg, meta), model=model)
     check_recorded_state(meta, problem, y0)
     return problem, method
+
+
+def _recorded_tolerance(cfg: dict[str, Any], meta: Mapping[str, Any]) -> dict[str, Any]:
+    """``cfg`` with the solver tolerance its run recorded when it set none.
+
+    A configuration without ``rtol`` ran at its method's default of the time, which the file
+    records (``meta["method_settings"]``, ``solver.rtol`` or, for a split step or a
+    composition, ``base.solver.rtol``); the rebuilt method takes that one, so that a resume
+    continues at the run's tolerance even where a later version's default differs (the
+    stochastic midpoint on spins with noise: ``1e-8`` since 2026-11-27, ``1e-14`` before).
+    """
+    settings = meta.get("method_settings") or {}
+    rtol = settings.get("solver.rtol", settings.get("base.solver.rtol"))
+    if not isinstance(rtol, (int, float)) or isinstance(rtol, bool) or not rtol > 0:
+        return cfg
+    if "solver" in cfg and cfg.get("rtol") is None:
+        return dict(cfg, rtol=float(rtol))
+    return cfg
 
 
 def check_recorded_model(
