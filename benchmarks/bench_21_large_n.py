@@ -37,6 +37,14 @@ iterations, then 2 a step to the end; at N = 512 11, 8, 6, 5, 4, 3, 3, then 2-3)
 Anderson mixing in these steps saved three iterations of the first one only (memory 1-3,
 N = 512), and a run of 10^5 steps does not see them.
 
+Tried and rejected (2026-11-27, 23:50 UTC, side by side against ``69a23e6``, one run each, a
+host slower than usual): lagging the triple product by one iterate (iteration ``k >= 2``
+combines ``P(X_k)`` with ``T(X_{k-1})``, formed only when another iteration follows), which
+saves one triangular product a solve. The lag's error in the residual,
+``(h^2/4) |T(X_k) - T(X_{k-1})|``, is comparable to the tolerance in the steady
+state, so steps took more iterations: 2.88 against 2.42 a step at N = 1024 (2.01 against 1.77
+s a step), 3.28 against 3.10 at N = 512 (the same time).
+
 Measured on the idle machine, 2026-11-26 (evening), one run each: before the stage offsets
 were taken from ``G(X)`` and the default degree of the start depended on the state
 (``0913063``), 0.69 at N = 512 (3.38 against 4.28 iterations a step) and 0.85 at N = 1024
