@@ -272,7 +272,7 @@ class StepTimer:
         The compiled runner (an error if the run has none) or the method's own NumPy steps on
         the same problem without its kernel.
 
-    :meth:`advance` continues from where the last call stopped, saving only the last state, so
+    :meth:`advance` continues from where the last call stopped, saving no state, so
     a benchmark times stepping alone. It runs with the thread counts a solve of the same run
     would (the enclosing :func:`isoflow.threads.thread_limits` block's, else the default: one
     BLAS thread), applied to every BLAS library as a solve applies them; without them, SciPy's
@@ -305,7 +305,9 @@ class StepTimer:
         pools = ThreadPools()
         try:
             pools.apply(plan_threads(None, parallel=r.parallel))
-            r.advance(n, SaveGrid(2**62, r.k + n), out)
+            # the steps of a long run between two save points (a chunk's step data drawn
+            # ahead goes on to the next call's first steps, as from chunk to chunk of a run)
+            r.advance(n, SaveGrid(2**62, 2**62), out)
         finally:
             pools.restore()
         if not r.failures.alive.all():

@@ -14,6 +14,7 @@ import pytest
 
 import isoflow as iso
 import user_kernels as uk
+from isoflow import io
 from isoflow._compiled import draws_ahead as ahead
 from isoflow._compiled import runner as compiled_runner
 from isoflow.noise import TransportNoise
@@ -315,3 +316,40 @@ def test_a_step_that_cannot_be_stored_is_an_error_not_a_wait() -> None:
         result = pool.submit(draws.result)
         with pytest.raises(ValueError, match="broadcast"):
             result.result(60)
+
+
+@needs_two_cores
+@pytest.mark.parametrize("model", [_thermal_lattice, _thermal_chain])
+def test_each_chunk_begins_with_the_steps_its_predecessor_drew_ahead(
+    monkeypatch: pytest.MonkeyPatch, tmp_path, model
+) -> None:  # type: ignore[no-untyped-def]
+    """While a chunk's last piece runs, the helpers draw the next chunk's first steps: every
+    chunk but the first begins with them, none is drawn past the run's last step, and the
+    states are those of ``threads=1`` bit for bit."""
+    monkeypatch.setattr(ahead, "DRAW_AHEAD_MIN_VALUES", 1)
+    ready: list[bool] = []
+    last: list[int] = []
+    original = compiled_runner.CompiledRunner._call_in_pieces
+    start = compiled_runner.CompiledRunner._start_draws
+
+    def spying(self, nsteps, grid, buf):  # type: ignore[no-untyped-def]
+        ready.append(self._drawn_next is not None and self._drawn_next[0] == self.k)
+        return original(self, nsteps, grid, buf)
+
+    def drawing(self, pool, k0, nsteps):  # type: ignore[no-untyped-def]
+        last.append(k0 + nsteps)
+        return start(self, pool, k0, nsteps)
+
+    monkeypatch.setattr(compiled_runner.CompiledRunner, "_call_in_pieces", spying)
+    monkeypatch.setattr(compiled_runner.CompiledRunner, "_start_draws", drawing)
+    prob, y0 = model()
+    runs = []
+    for name, threads in (("ahead.h5", None), ("inline.h5", 1)):
+        # a writer that takes one row a chunk: a chunk ends at every save point (7 steps)
+        writer = io.HDF5Writer(tmp_path / name, chunk_rows=1, flush_seconds=0.0)
+        iso.solve(prob, iso.StochasticIsoMP(), y0, dt=0.05, n_steps=90, save_every=7,
+                  progress=False, threads=threads, writer=writer)  # fmt: skip
+        runs.append(io.load(tmp_path / name))
+    assert len(ready) >= 10 and not ready[0] and all(ready[1:]), ready
+    assert max(last) == 90
+    np.testing.assert_array_equal(runs[0].ys, runs[1].ys)

@@ -198,6 +198,9 @@ class CompiledRunner(Runner):
         self._drive: Any = None
         self._buffers: tuple[Array, Array, Array] | None = None
         self._step_values = 0  # values of a step's step data (all members), once drawn
+        # the step data of the next chunk's first steps, drawn during this chunk's last piece:
+        # (first step k0, data (n, members, D)); used only by a chunk that starts at k0
+        self._drawn_next: tuple[int, Array] | None = None
 
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS (the BLAS
@@ -507,20 +510,40 @@ class CompiledRunner(Runner):
     def _call_in_pieces(self, nsteps: int, grid: SaveGrid, buf: Array) -> None:
         """The chunk's steps in :func:`~isoflow._compiled.draws_ahead.pieces`, each piece's
         step data drawn by helper threads while the loop runs the piece before (and by this
-        thread too once the loop is done: :class:`~isoflow._compiled.draws_ahead.StepDraws`)."""
+        thread too once the loop is done: :class:`~isoflow._compiled.draws_ahead.StepDraws`).
+
+        While the last piece runs, the helpers draw the first steps of the run's next chunk
+        (as many as this chunk's first piece, not past the run's last step), which that chunk
+        then takes as its first piece: otherwise a helper would wait for the end of the chunk,
+        and the next chunk would begin with draws that nothing runs beside (a run's chunks
+        last about half a second, :class:`isoflow._time_loop.ChunkPolicy`, shorter where the
+        writer takes few rows a chunk). The data of a step depends on the step and the member
+        alone, so who draws it, and when, changes nothing."""
         everyone = slice(None)
-        sizes = pieces(nsteps)
         k0 = self.k
+        sizes = pieces(nsteps)
+        first, self._drawn_next = self._drawn_next, None
+        if first is not None and (first[0] != k0 or first[1].shape[0] > nsteps):
+            first = None  # drawn for another chunk (not the one that follows)
+        if first is not None:
+            m = first[1].shape[0]
+            sizes = [m, *pieces(nsteps - m)] if m < nsteps else [m]
+        next_steps = min(sizes[0], grid.k_final - (k0 + nsteps))
         row = 0
         try:
             with self._draw_pool() as pool:
-                data = self._start_draws(pool, k0, sizes[0]).result()
+                if first is not None:
+                    data = first[1]
+                else:
+                    data = self._start_draws(pool, k0, sizes[0]).result()
                 ahead: StepDraws | None = None
                 try:
                     for j, n in enumerate(sizes):
                         ahead = None
                         if j + 1 < len(sizes):
                             ahead = self._start_draws(pool, k0 + n, sizes[j + 1])
+                        elif next_steps > 0:  # the next chunk's first piece
+                            ahead = self._start_draws(pool, k0 + n, next_steps)
                         r = grid.count(k0, k0 + n)
                         self.rec[:, driver.REC_CALL_DONE] = 0.0
                         self._call(self._args(everyone, n, k0, grid, buf[row : row + r], data))
@@ -528,6 +551,8 @@ class CompiledRunner(Runner):
                         row += r
                         if ahead is not None:
                             data = ahead.result()
+                    if next_steps > 0:
+                        self._drawn_next = (k0, data)
                 except BaseException:
                     if ahead is not None:
                         ahead.cancel()  # the helpers stop before the pool is shut down
