@@ -32,6 +32,10 @@ became ``1e-8`` (:meth:`isoflow.StochasticIsoMP.for_problem`: the closed-form st
 ``|S_i|`` whatever the tolerance, as the Cayley update does), and this benchmark's step timer
 settling the method as a solve does: **met** with both, 1.26 with the default update (9.1
 against 7.2 ms a step, 7 iterations against IsoMP's 9) and 1.27 with the Cayley update.
+
+Again at 00:43 UTC on 2026-11-28, timed in calls of a solve's chunk (benchmark 18's docstring)
+after a chunk's first steps came to be drawn during the chunk before: 1.11 and 1.13 (7.5
+against 6.7 ms a step; 1.16 and 1.18 in calls of 10 steps).
 """
 
 from __future__ import annotations
