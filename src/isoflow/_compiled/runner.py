@@ -513,22 +513,23 @@ class CompiledRunner(Runner):
         thread too once the loop is done: :class:`~isoflow._compiled.draws_ahead.StepDraws`).
 
         While the last piece runs, the helpers draw the first steps of the run's next chunk
-        (as many as this chunk's first piece, not past the run's last step), which that chunk
-        then takes as its first piece: otherwise a helper would wait for the end of the chunk,
-        and the next chunk would begin with draws that nothing runs beside (a run's chunks
-        last about half a second, :class:`isoflow._time_loop.ChunkPolicy`, shorter where the
-        writer takes few rows a chunk). The data of a step depends on the step and the member
-        alone, so who draws it, and when, changes nothing."""
+        (as many as :func:`~isoflow._compiled.draws_ahead.pieces` gives this chunk first, not
+        past the run's last step), which that chunk then takes as its first piece: otherwise
+        a helper would wait for the end of the chunk, and the next chunk would begin with
+        draws that nothing runs beside (a run's chunks last about half a second,
+        :class:`isoflow._time_loop.ChunkPolicy`, shorter where the writer takes few rows a
+        chunk). The data of a step depends on the step and the member alone, so who draws it,
+        and when, changes nothing."""
         everyone = slice(None)
         k0 = self.k
         sizes = pieces(nsteps)
+        next_steps = min(sizes[0], grid.k_final - (k0 + nsteps))  # drawn for the next chunk
         first, self._drawn_next = self._drawn_next, None
         if first is not None and (first[0] != k0 or first[1].shape[0] > nsteps):
             first = None  # drawn for another chunk (not the one that follows)
         if first is not None:
             m = first[1].shape[0]
             sizes = [m, *pieces(nsteps - m)] if m < nsteps else [m]
-        next_steps = min(sizes[0], grid.k_final - (k0 + nsteps))
         row = 0
         try:
             with self._draw_pool() as pool:
