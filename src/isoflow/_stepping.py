@@ -100,6 +100,19 @@ class Runner:
         self.residual_max = 0.0
         self.b_evaluations = 0
 
+    @property
+    def numba_threaded(self) -> bool:
+        """Whether its steps run on numba threads: members in parallel (:attr:`parallel`) or
+        one system's work cut into pieces (a long spin chain, a large complex matrix). The
+        run's thread plan then gives the cores to numba, not to BLAS."""
+        return self.parallel
+
+    @property
+    def serial_by_default(self) -> bool:
+        """Whether its numba threads are one unless the run asks for more (see
+        :attr:`isoflow._compiled.layout.Layout.serial_by_default`)."""
+        return False
+
     def advance(self, nsteps: int, grid: SaveGrid, out: Array) -> None:
         """Take ``nsteps`` steps; the state after every save point ``k`` of ``grid``
         (:meth:`SaveGrid.is_save <isoflow._save_grid.SaveGrid.is_save>`) goes into the next

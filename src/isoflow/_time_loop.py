@@ -24,6 +24,7 @@ reproduces an uninterrupted run bit for bit.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import signal
 import threading
 import time
@@ -48,7 +49,7 @@ from ._writers import PIPELINE_MIN_ROWS, PIPELINE_SECONDS, MemoryWriter, Sink, S
 from .diagnostics import DiagnosticsAccumulator
 from .methods import Method
 from .problems import IsospectralProblem
-from .threads import ThreadPools, ThreadRequest, plan_threads
+from .threads import ThreadPools, ThreadRequest, default_request, plan_threads
 
 __all__ = [
     "CHUNK_BYTES",
@@ -85,11 +86,14 @@ def run_threads(threads: ThreadRequest) -> Iterator[ThreadPools]:
 
 
 def _settle_threads(pools: ThreadPools, threads: ThreadRequest, runner: Runner) -> dict[str, int]:
-    """Apply the final thread counts for ``runner`` (a number of cores goes to numba when it
-    runs members in parallel, else to BLAS); return those it uses (``stats.threads``)."""
-    plan = plan_threads(threads, parallel=runner.parallel)
+    """Apply the final thread counts for ``runner`` (a number of cores goes to numba when its
+    steps run on numba threads, else to BLAS); return those it uses (``stats.threads``)."""
+    threaded = runner.numba_threaded
+    plan = plan_threads(threads, parallel=threaded)
+    if threaded and runner.serial_by_default and default_request(threads):
+        plan = dataclasses.replace(plan, numba=1)
     pools.apply(plan)
-    return {"cores": plan.cores, "numba": plan.numba if runner.parallel else 1, "blas": plan.blas}
+    return {"cores": plan.cores, "numba": plan.numba if threaded else 1, "blas": plan.blas}
 
 
 def runner_for(

@@ -21,8 +21,11 @@ product it takes part in (on two cores with the other one busy, the README's fir
   parallel (members are independent: the work is handed out in small pieces, so a thread slowed
   by another process leaves its pieces to the others);
 * ``threads=k`` (:func:`isoflow.solve`, :func:`isoflow.io.resume`, ``isoflow run --threads``):
-  the solve may use ``k`` cores: numba threads when its compiled loop runs members (or chunks) in
-  parallel, else BLAS threads; ``threads={"blas": b, "numba": m}`` chooses both;
+  the solve may use ``k`` cores: numba threads when its compiled loop runs members (or chunks,
+  or the pieces of one large complex matrix) in parallel, else BLAS threads;
+  ``threads={"blas": b, "numba": m}`` chooses both. A large complex matrix runs its pieces on
+  one thread unless the run asks for more (:func:`default_request`; its pieces are split in
+  equal shares, so a thread sharing its core with another process holds up every pass);
 * inside ``with thread_limits(...)``, solves without ``threads=`` use the block's choice;
 * ``blas * numba <= cores`` always: a request for more threads than cores is refused; and the
   environment variables a user sets are upper bounds: ``OPENBLAS_NUM_THREADS``,
@@ -67,6 +70,7 @@ __all__ = [
     "ThreadRequest",
     "available_cores",
     "current_threads",
+    "default_request",
     "environment_limits",
     "plan_threads",
     "thread_limits",
@@ -257,6 +261,12 @@ def plan_threads(threads: ThreadRequest = None, *, parallel: bool = True) -> Thr
         numba = min(numba, env["numba"])
     numba = min(numba, int(nb.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
     return ThreadPlan(blas=blas, numba=numba, cores=cores)
+
+
+def default_request(threads: ThreadRequest = None) -> bool:
+    """Whether a solve given ``threads`` runs with the default policy: no request of its own
+    and none from an enclosing :func:`thread_limits` block."""
+    return threads is None and _REQUEST.get() is None
 
 
 def blas_threads() -> int:

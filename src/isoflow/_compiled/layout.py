@@ -53,8 +53,14 @@ class Layout:
         and the offsets are mapped to the user's layout and back at every save point, so that
         a run restarted from a saved state (a checkpoint) continues it bit for bit.
     threaded : bool
-        A unit's sweeps run over numba threads (a long spin chain cut into chunks): the loop
-        of one unit is not serial.
+        A unit's work runs over numba threads (a long spin chain cut into chunks, the
+        products and passes of a large complex matrix): the loop of one unit is not serial,
+        and the run's cores go to numba (:mod:`isoflow.threads`).
+    serial_by_default : bool
+        A ``threaded`` unit runs on one numba thread unless the run asks for more
+        (``threads=k``, ``{"numba": m}`` or a :func:`~isoflow.threads.thread_limits` block):
+        its pieces are split among the threads in equal shares, so a thread that shares its
+        core with another process holds up every pass (measured in the threads guide).
     """
 
     name: str
@@ -68,6 +74,7 @@ class Layout:
     field: tuple[Any, tuple[Any, ...]] | None = None
     restart_at_saves: bool = False
     threaded: bool = False
+    serial_by_default: bool = False
 
     @property
     def blocks(self) -> frozenset[str]:

@@ -202,6 +202,16 @@ class CompiledRunner(Runner):
         # (first step k0, data (n, members, D)); used only by a chunk that starts at k0
         self._drawn_next: tuple[int, Array] | None = None
 
+    @property
+    def numba_threaded(self) -> bool:
+        """Members over numba threads, or a layout whose unit's work runs on them."""
+        return self.parallel or self.layout.threaded
+
+    @property
+    def serial_by_default(self) -> bool:
+        """One system's threaded work on one thread unless the run asks for more."""
+        return self.layout.serial_by_default and not self.parallel
+
     def _threads_allowed(self) -> bool:
         """Units may run on numba threads unless they call a multithreaded BLAS (the BLAS
         threads in force: those of the run's thread plan, :mod:`isoflow.threads`)."""
