@@ -25,6 +25,7 @@ operations).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -42,6 +43,7 @@ from .layout import Layout, member_layout
 __all__ = [
     "PLANAR_MIN_N",
     "SMALL_N",
+    "THREADED_MIN_N",
     "DenseBlas",
     "DenseSmall",
     "dense_layout",
@@ -66,6 +68,9 @@ PLANAR_MIN_N = 128
 #: Row-block height of the planar stage's triangular products: real products of half the
 #: work of complex ones stay efficient at smaller blocks (8 blocks from n = 512, benchmark 12).
 _PLANAR_BLOCK = 64
+#: Smallest ``n`` at which a single complex system's planar stage runs its products and passes
+#: over numba threads (:mod:`.dense_planar`; measured, benchmark 21).
+THREADED_MIN_N = 256
 
 
 class DenseSmall(NamedTuple):
@@ -81,7 +86,9 @@ class DenseBlas(NamedTuple):
     """A dense ``n x n`` state, products through BLAS. ``rowoff`` and ``blocks`` describe the
     packed triangular product of the fused IsoMP stage (:mod:`.dense_tiles`); ``planar``: a
     complex state from :data:`PLANAR_MIN_N` on, whose IsoMP runs in real planes
-    (:mod:`.dense_planar`)."""
+    (:mod:`.dense_planar`); ``threaded``: a planar single system from
+    :data:`THREADED_MIN_N` on, whose products and passes run over numba threads (in pieces
+    that do not depend on the thread count)."""
 
     n: int
     s: float
@@ -89,6 +96,7 @@ class DenseBlas(NamedTuple):
     rowoff: NDArray[np.int64]
     blocks: NDArray[np.int64]
     planar: bool
+    threaded: bool = False
 
 
 def sigma_sign(alg: Any) -> float | None:
@@ -325,9 +333,9 @@ def _load_scipy_blas() -> None:
     import scipy.linalg.cython_blas  # noqa: F401
 
 
-def record(alg: Any) -> DenseSmall | DenseBlas:
-    """The layout record of the dense space ``alg`` (written-out products up to
-    :data:`SMALL_N`)."""
+def record(alg: Any, members: int = 1) -> DenseSmall | DenseBlas:
+    """The layout record of the dense space ``alg`` for a run of ``members`` members
+    (written-out products up to :data:`SMALL_N`; a single large complex system threaded)."""
     s = sigma_sign(alg)
     assert s is not None
     n = alg.shape[0]
@@ -337,7 +345,8 @@ def record(alg: Any) -> DenseSmall | DenseBlas:
     _load_scipy_blas()
     planar = bool(alg.is_complex) and n >= PLANAR_MIN_N
     blocks_, rowoff = packed_row_offsets(n, _PLANAR_BLOCK if planar else _BLOCK)
-    return DenseBlas(n, s, traceless, rowoff, blocks_, planar)
+    threaded = planar and members == 1 and n >= THREADED_MIN_N
+    return DenseBlas(n, s, traceless, rowoff, blocks_, planar, threaded)
 
 
 def dense_layout(problem: Any, members: int) -> Layout | None:
@@ -351,15 +360,20 @@ def dense_layout(problem: Any, members: int) -> Layout | None:
     if sigma_sign(alg) is None:
         return None
     kernel = problem.kernel
-    rec = record(alg)
+    rec = record(alg, members)
     if isinstance(rec, DenseSmall):
         kind = "written-out products"
     else:
         kind = "BLAS, real planes" if rec.planar else "BLAS"
     name = f"dense {alg.name} ({kind})"
+    if isinstance(rec, DenseBlas) and rec.threaded:
+        name = f"{name[:-1]}, threaded)"
     if isinstance(kernel, ElementwiseLinear) and kernel.frame is not None:
-        return _frame_layout(name, rec, alg, kernel)
-    return member_layout(name, rec, alg.shape, alg.dtype)
+        layout = _frame_layout(name, rec, alg, kernel)
+    else:
+        layout = member_layout(name, rec, alg.shape, alg.dtype)
+    threaded = isinstance(rec, DenseBlas) and rec.threaded
+    return dataclasses.replace(layout, threaded=threaded, serial_by_default=threaded)
 
 
 def _frame_layout(name: str, rec: Any, alg: Any, kernel: ElementwiseLinear) -> Layout:

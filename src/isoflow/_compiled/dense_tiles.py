@@ -26,6 +26,7 @@ import numpy as np
 
 from .dense import _TILE, remove_trace, remove_trace_compensated
 from .flat import two_sum
+from .subnormals import flush_on, flush_restore
 
 __all__ = ["NWORK", "finish", "iterate", "iterate_from_B"]
 
@@ -126,6 +127,14 @@ def iterate(f, fargs, lay, mp, sd, W, X, G, aux, work, hp, rr):  # type: ignore[
 def iterate_from_B(lay, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
     """The iteration after ``B`` (``work[0]``, ``(n, n)``) is formed: the stages that change
     ``B`` (the stochastic midpoint's noise) share the rest."""
+    old = flush_on()  # subnormals flushed (isoflow._compiled.subnormals)
+    _iterate_from_B(lay, W, X, G, aux, work, hp, rr)
+    flush_restore(old)
+
+
+@numba.njit(cache=True)
+def _iterate_from_B(lay, W, X, G, aux, work, hp, rr):  # type: ignore[no-untyped-def]
+    """:func:`iterate_from_B` with the flush bits set."""
     n = lay.n
     s = lay.s
     half = 0.5 * hp
@@ -166,7 +175,7 @@ def close_update(lay, Wn, E, acc, fin):  # type: ignore[no-untyped-def]
     fin[0] = math.isfinite(acc)
 
 
-@numba.njit(cache=True, fastmath={"nsz", "contract"})
+@numba.njit(cache=True)
 def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """``Wn = Pi_V(W + h (P + sigma(P)))`` with ``P = B X`` in ``aux``, computed on the lower
     triangle and mirrored tile by tile, compensated by ``E`` (mirrored the same way) unless
@@ -177,6 +186,14 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ign
     reassociation here: it would simplify the compensation's exact error away (the pass is
     one of several per step; benchmark 17 measures it).
     """
+    old = flush_on()  # subnormals flushed (isoflow._compiled.subnormals)
+    _finish(lay, W, aux, hp, E, Wn, fin)
+    flush_restore(old)
+
+
+@numba.njit(cache=True, fastmath={"nsz", "contract"})
+def _finish(lay, W, aux, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
+    """:func:`finish` with the flush bits set."""
     n = lay.n
     s = lay.s
     h = hp
