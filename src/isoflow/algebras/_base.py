@@ -34,6 +34,7 @@ from .._errors import (
     ShapeError,
     UnsupportedAlgebraError,
 )
+from .._reductions import sum_of_squares, trace
 
 __all__ = ["Algebra", "MatrixAlgebra"]
 
@@ -570,7 +571,7 @@ class MatrixAlgebra(Algebra):
         Wa = np.asarray(W)
         if (
             self.transpose_sign is not None
-            and Wa.size >= _COMPILED_DISTANCE_SIZE
+            and self.n * self.n >= _COMPILED_DISTANCE_SIZE
             and Wa.dtype in (np.float64, np.complex128)
         ):
             from .._distance_compiled import distances
@@ -582,7 +583,7 @@ class MatrixAlgebra(Algebra):
         D = Wa - self.sigma(Wa)
         D *= 0.5
         if self.traceless:  # W - P = D + (Tr(W - D) / n) I
-            tr = (np.trace(Wa, axis1=-2, axis2=-1) - np.trace(D, axis1=-2, axis2=-1)) / self.n
+            tr = (trace(Wa) - trace(D)) / self.n  # a member's bits in any batch
             idx = np.arange(self.n)
             D[..., idx, idx] += tr[..., None]
         return np.sqrt(_sum_of_squares(D))
@@ -696,7 +697,7 @@ class MatrixAlgebra(Algebra):
         out = []
         P = W
         for _ in range(self.n):
-            out.append(np.trace(P, axis1=-2, axis2=-1))
+            out.append(trace(P))
             P = P @ W
         return np.stack(out, axis=-1)
 
@@ -712,19 +713,18 @@ class MatrixAlgebra(Algebra):
     casimirs_are_eigenvalues: bool = True
 
 
-#: Entries from which :meth:`MatrixAlgebra.distance` runs compiled (below, NumPy: no compilation
-#: for the small checks of a run's start).
+#: Entries of one member from which :meth:`MatrixAlgebra.distance` runs compiled (below, NumPy:
+#: no compilation for small states). A member's size, not the batch's: a state gets the same
+#: bits in any batch (a resumed run's first row alone, :mod:`isoflow._reductions`).
 _COMPILED_DISTANCE_SIZE = 1 << 16
 
 
 def _sum_of_squares(M: Array) -> Array:
-    r""":math:`\sum_{ij} |M_{ij}|^2` over the last two axes (real arithmetic, no temporary of
-    ``M``'s size for a contiguous ``M``)."""
-    if M.dtype.kind == "c":
-        return _sum_of_squares(M.real) + _sum_of_squares(M.imag)
-    if M.dtype.kind != "f":
+    r""":math:`\sum_{ij} |M_{ij}|^2` over the last two axes, the same bits for a member in any
+    batch (:mod:`isoflow._reductions`; temporaries of bounded size)."""
+    if M.dtype.kind not in "fc":
         M = M.astype(np.float64)
-    return np.einsum("...ij,...ij->...", M, M)
+    return sum_of_squares(M)
 
 
 #: States below this many bytes are not checked against the available memory.

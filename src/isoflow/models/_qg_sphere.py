@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._errors import ParameterError
+from .._reductions import real_inner
 from ..algebras import su
 from ..kernels import CompiledB
 from ..problems import IsospectralProblem
@@ -303,7 +304,7 @@ def qg_sphere(
     def energy_weight(E: Array) -> Array:
         r"""The QG energy of each unit harmonic ``E``: :math:`-\frac{4\pi}{N}\operatorname{Re}
         \langle E, A^{-1}E\rangle` (:math:`1/\lambda_l` as ``F, kappa -> 0``)."""
-        return -(4.0 * np.pi / N) * np.einsum("kab,kab->k", np.conj(E), op.solve(E)).real
+        return -(4.0 * np.pi / N) * real_inner(E, op.solve(E))
 
     split = sphere_split(
         N, viscosity=viscosity, hyperviscosity=hyperviscosity, drag=drag, forcing=forcing,
@@ -319,7 +320,7 @@ def qg_sphere(
 
     def hamiltonian(Q: Array) -> Array:
         Qa = np.asarray(Q)
-        tr = np.einsum("...ab,...ab->...", np.conj(stream(Qa)), relative(Qa)).real
+        tr = real_inner(stream(Qa), relative(Qa))
         return -2.0 * np.pi / N * tr
 
     def tendency(Q: Array) -> Array:

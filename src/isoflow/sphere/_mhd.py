@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._eig import eigh_diagonal
 from .._errors import ParameterError, ShapeError
+from .._reductions import real_inner
 from ._diagnostics import _coefficients_of, enstrophy_spectrum
 from ._operators import as_matrices, laplacian
 
@@ -48,7 +49,7 @@ def magnetic_energy(Theta: ArrayLike) -> Array:
     """
     flat, batch, N = as_matrices(Theta, "magnetic_energy")
     J = laplacian(flat)
-    tr = np.einsum("kab,kab->k", np.conj(J), flat).real
+    tr = real_inner(J, flat)
     return (-2.0 * np.pi / N * tr).reshape(batch)
 
 
