@@ -1,4 +1,5 @@
-"""A single large complex system on numba threads, and subnormals flushed in its products.
+"""A single large complex system on numba threads, and subnormals flushed in its products
+(the dense stages and the BLAS pair layout).
 
 * From ``n = THREADED_MIN_N`` a single complex system's planar stage runs its products and
   passes over numba threads in pieces fixed by ``n`` alone: the states do not depend on the
@@ -8,7 +9,8 @@
   pieces on one thread.
 * The dense BLAS stages flush subnormal results and operands to zero inside their products
   (x86-64): the caller's floating-point control word is the same after a solve, the bits are
-  set inside, and a state whose entries fall to 1e-300 steps as the NumPy path does.
+  set inside, and a state whose entries fall to 1e-300 steps as the NumPy path does (so does
+  an MHD pair on the BLAS pair layout, which flushes inside its six products).
 """
 
 from __future__ import annotations
@@ -135,3 +137,26 @@ def test_a_state_with_subnormal_products_steps_as_the_numpy_path_does(n: int) ->
     scale = np.abs(numpy_path.ys[-1]).max()
     assert np.abs(fast.ys[-1] - numpy_path.ys[-1]).max() <= 1e-13 * scale
     assert fast.diagnostics.casimir_drift < 1e-13
+
+
+@flushes
+def test_mhd_pairs_with_subnormal_products_step_as_the_numpy_path_does() -> None:
+    """The BLAS pair layout (MHD on the sphere) flushes inside its products: a band-limited
+    pair whose products are subnormal steps as the NumPy path does, and the caller's control
+    word is what it was."""
+    n = 64
+    prob, _ = iso.models.mhd_sphere(N=n, seed=1)
+    y0 = np.stack([_banded(n, 700.0 / n, seed=4), _banded(n, 700.0 / n, seed=5)])
+    assert np.abs(y0).min() < 1e-290
+    B0 = prob.evaluate_B(y0)
+    h = 0.2 / max(float(np.linalg.norm(B0[0], 2)), float(np.linalg.norm(B0[1], 2)))
+    before = subnormals.control_word()
+    fast = iso.solve(prob, iso.IsoMP(), y0, dt=h, n_steps=3, progress=False)
+    assert subnormals.control_word() == before
+    assert fast.stats.runner.startswith("compiled, dual pairs") and "BLAS" in fast.stats.runner
+    python_B = iso.IsospectralProblem(algebra=prob.algebra, B=prob.B)  # no kernel: NumPy
+    numpy_path = iso.solve(python_B, iso.IsoMP(), y0, dt=h, n_steps=3, progress=False)
+    assert numpy_path.stats.runner == "NumPy"
+    scale = np.abs(numpy_path.ys[-1]).max()
+    assert np.abs(fast.ys[-1] - numpy_path.ys[-1]).max() <= 1e-13 * scale
+    assert float(np.abs(fast.ys[-1] - y0).max()) > 1e-6 * scale  # moved far more than 1e-13
