@@ -18,8 +18,8 @@ product it takes part in (on two cores with the other one busy, the README's fir
   measurements are in ``docs/user_guide/threads.rst``: two BLAS threads lose to one for the
   sizes measured as soon as the other core is busy, and gain nothing for small states even on
   an idle machine), and numba threads on every core for the compiled loops that run members in
-  parallel (members are independent: the work is handed out in small pieces, so a thread slowed
-  by another process leaves its pieces to the others);
+  parallel (members are independent: each thread takes the next member as it comes free, so
+  a thread slowed by another process leaves the rest to the others);
 * ``threads=k`` (:func:`isoflow.solve`, :func:`isoflow.io.resume`, ``isoflow run --threads``):
   the solve may use ``k`` cores: numba threads when its compiled loop runs members (or chunks,
   or the pieces of one large complex matrix) in parallel, else BLAS threads;

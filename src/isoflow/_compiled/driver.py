@@ -52,6 +52,7 @@ import numba
 import numpy as np
 
 from . import blocks
+from .atomics import take
 from .flat import copy, guess, push
 from .rules import CONTINUE, STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE, stopping_step
 
@@ -385,13 +386,22 @@ def drive_parallel(  # type: ignore[no-untyped-def]
     begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, sv, sw, se,
 ):  # fmt: skip
-    """:func:`run_unit` for every unit of ``W``, units over numba threads, each on its
-    thread's buffers (``numba.get_thread_id()`` is below the threads of the region, which
-    the buffers' first axis covers)."""
+    """:func:`run_unit` for every unit of ``W`` over numba threads, each on its thread's
+    buffers (``numba.get_thread_id()`` is below the threads of the region, which the buffers'
+    first axis covers). Each thread takes the next unit from a shared counter as it comes
+    free (:func:`~isoflow._compiled.atomics.take`), so a thread that shares its core or draws
+    the costlier members does not hold up the others; a unit's states do not depend on the
+    thread that runs it."""
     L = blocks.lanes(lay)
-    for u in numba.prange(W.shape[0]):
-        run_unit(
-            begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
-            nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, sv, sw, se, u * L,
-            numba.get_thread_id(),
-        )  # fmt: skip
+    U = W.shape[0]
+    taken = np.zeros(1, np.int64)
+    for _ in numba.prange(min(sv.shape[0], U)):
+        tid = numba.get_thread_id()
+        u = take(taken)
+        while u < U:
+            run_unit(
+                begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
+                nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, sv, sw, se, u * L,
+                tid,
+            )  # fmt: skip
+            u = take(taken)

@@ -382,15 +382,6 @@ class CompiledRunner(Runner):
             return out.reshape(R, self.M, self.S)
         return np.empty((R, self.M, self.member_size), self.W.dtype)
 
-    @property
-    def _chunk(self) -> int:
-        """Units per piece of a parallel call, handed out to the threads as they come free:
-        about 16 pieces per thread, so that a thread slowed by other work (the writer thread's
-        diagnostics of the saved rows) leaves its remaining pieces to the others instead of
-        holding up the end of the call. Units are independent: the pieces do not change any
-        result."""
-        return max(1, self.U // (16 * _threads()))
-
     def _head(self) -> tuple[Any, ...]:
         """The driver's first arguments: the stage's functions, the mixing and the field."""
         return (self.begin, self.impl.iterate, self.impl.finish, self.mix, self.f, self.fargs)
@@ -398,10 +389,8 @@ class CompiledRunner(Runner):
     def _call(self, args: tuple[Any, ...]) -> None:
         """Run the compiled driver on ``args``; the first call gets it from :meth:`_driver`
         and compiles it (or loads it from numba's cache; a compilation is announced), later
-        calls reuse it. A parallel driver hands out its units in pieces of :attr:`_chunk`."""
-        import numba
-
-        chunk = self._chunk if self.parallel else 0  # 0: numba's static split
+        calls reuse it. A parallel driver hands its units to the threads as they come free
+        (:func:`~isoflow._compiled.driver.drive_parallel`)."""
         head = self._head()
         if self._drive is None:
             from .._compile_clock import compile_notice
@@ -410,12 +399,10 @@ class CompiledRunner(Runner):
             with compile_notice(f"the compiled loop for {what}"):
                 drive = self._driver(args)
                 self._drive = drive  # compiled: a raise from here on is the field's
-                with numba.parallel_chunksize(chunk):
-                    drive(*head, *args)
+                drive(*head, *args)
             self._drive = drive
         else:
-            with numba.parallel_chunksize(chunk):
-                self._drive(*head, *args)
+            self._drive(*head, *args)
 
     def _args(
         self, units: slice, nsteps: int, k0: int, grid: SaveGrid, rows: Array,
