@@ -21,6 +21,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from . import _numba_cache
 from . import algebras as algebras
 from . import noise as noise
 from . import splitting as splitting
@@ -67,6 +68,10 @@ from .splitting import Forcing as Forcing
 from .splitting import LinearPart as LinearPart
 from .splitting import ModalLinearPart as ModalLinearPart
 from .splitting import StochasticForcing as StochasticForcing
+
+# numba loads later, on a run's first compiled path; a source checkout's cached loops that a
+# change to an inlined block left stale go first (isoflow._numba_cache).
+_numba_cache.refresh_checkout_cache()
 
 if TYPE_CHECKING:  # what __getattr__ provides, for type checkers and editors
     from . import ensemble as ensemble
