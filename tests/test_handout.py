@@ -22,7 +22,9 @@ import isoflow as iso
 from isoflow._compiled.atomics import take
 from isoflow.threads import available_cores
 
-two_cores = pytest.mark.skipif(available_cores() < 2, reason="needs 2 cores")
+two_cores = pytest.mark.skipif(
+    available_cores() < 2 or numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 cores"
+)
 
 
 @numba.njit(parallel=True)
