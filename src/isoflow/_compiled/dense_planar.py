@@ -49,7 +49,7 @@ import numba
 import numpy as np
 
 from .dense import _TILE
-from .dense_tiles import _load_t, _store_t, close_update
+from .dense_tiles import _load_t, _store_t, close_update, diagonal_tile_entry
 from .flat import two_sum
 from .subnormals import flush_on, flush_restore
 
@@ -424,15 +424,7 @@ def _finish_row(Wm, Wo, Em, Pr, Pi, s, h, compensated, bi, PrT, PiT, VT, ET, acc
     for i in range(bi, ie):  # the diagonal tile
         for j in range(bi, i + 1):
             d = complex(h * (Pr[i, j] + s * Pr[j, i]), h * (Pi[i, j] - s * Pi[j, i]))
-            if compensated:
-                v, e = two_sum(Wm[i, j], d + Em[i, j])
-                Em[i, j] = e
-                Em[j, i] = s * e.conjugate()
-            else:
-                v = Wm[i, j] + d
-            Wo[i, j] = v
-            Wo[j, i] = s * v.conjugate()
-            acc += abs(v.real) + abs(v.imag)
+            acc += diagonal_tile_entry(Wm, Wo, Em, i, j, d, s, compensated)
     return acc
 
 

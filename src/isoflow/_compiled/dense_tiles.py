@@ -191,6 +191,23 @@ def finish(f, fargs, lay, mp, sd, W, X, aux, work, hp, E, Wn, fin):  # type: ign
     flush_restore(old)
 
 
+@numba.njit(cache=True, fastmath={"nsz", "contract"}, inline="always")
+def diagonal_tile_entry(Wm, Wo, Em, i, j, d, s, compensated):  # type: ignore[no-untyped-def]
+    """``Wo[i, j] = Wm[i, j] + d`` (with the compensation ``Em`` carried when
+    ``compensated``) and its mirror ``Wo[j, i] = s conj(Wo[i, j])``, for an entry of a diagonal
+    tile of the finish (``j <= i``); returns ``|Re| + |Im|`` of the new entry. Shared by the
+    complex and the planar finish."""
+    if compensated:
+        v, e = two_sum(Wm[i, j], d + Em[i, j])
+        Em[i, j] = e
+        Em[j, i] = s * e.conjugate()
+    else:
+        v = Wm[i, j] + d
+    Wo[i, j] = v
+    Wo[j, i] = s * v.conjugate()
+    return abs(v.real) + abs(v.imag)
+
+
 @numba.njit(cache=True, fastmath={"nsz", "contract"})
 def _finish(lay, W, aux, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
     """:func:`finish` with the flush bits set."""
@@ -241,13 +258,5 @@ def _finish(lay, W, aux, hp, E, Wn, fin):  # type: ignore[no-untyped-def]
         for i in range(bi, ie):  # the diagonal tile
             for j in range(bi, i + 1):
                 d = h * (P[i, j] + s * P[j, i].conjugate())
-                if compensated:
-                    v, e = two_sum(Wm[i, j], d + Em[i, j])
-                    Em[i, j] = e
-                    Em[j, i] = s * e.conjugate()
-                else:
-                    v = Wm[i, j] + d
-                Wo[i, j] = v
-                Wo[j, i] = s * v.conjugate()
-                acc += abs(v.real) + abs(v.imag)
+                acc += diagonal_tile_entry(Wm, Wo, Em, i, j, d, s, compensated)
     close_update(lay, Wn, E, acc, fin)
