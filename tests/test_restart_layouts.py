@@ -106,6 +106,14 @@ CASES: dict[str, tuple[Callable[[], tuple[Any, Any]], Callable[[], iso.Method]]]
         lambda: iso.models.mhd_sphere(N=17, lmax=4, seed=1),
         iso.IsoMP,
     ),
+    "su(17) BLAS, least-squares start": (
+        lambda: _euler(17),
+        lambda: iso.IsoMP(extrapolation_order=3, extrapolation_window=9),
+    ),
+    "su(16) dense, least-squares start": (
+        lambda: _euler(16),
+        lambda: iso.IsoMP(extrapolation_order=2, extrapolation_window=7),
+    ),
     "su(17) BLAS, Cayley update": (
         lambda: _euler(17),
         lambda: iso.IsoMP(update="cayley", solver=iso.FixedPoint(rtol=1e-8)),

@@ -96,6 +96,10 @@ def copy(dst, src):  # type: ignore[no-untyped-def]
         dst[i] = src[i]
 
 
+#: Entries of a chunk of :func:`guess` beyond seven offsets (32 KiB of complex entries).
+_GUESS_CHUNK = 2048
+
+
 @numba.njit(cache=True, inline="always")
 def _back(head, q, K):  # type: ignore[no-untyped-def]
     """``(head - q) % K`` for ``0 <= q < K`` without a division (the ring's older slots)."""
@@ -110,7 +114,8 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
 
     The sum is evaluated left to right from the newest offset, as the NumPy path does
     (:meth:`isoflow.IsoMP.initial_stage`); up to seven offsets are written out in one loop
-    and each further one adds a pass, so every loop vectorizes.
+    and each further one is added in turn over chunks of ``X`` that stay in cache, so every
+    loop vectorizes and each offset is read once.
     """
     S = W.shape[0]
     K = ring.shape[0]
@@ -162,17 +167,20 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
             e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
             X[i] = W[i] + (e + a6 * d6[i])
         return sumsq(W)
-    # more offsets: the first seven written out as above, each further one a pass over X
-    for i in range(S):
-        e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
-        X[i] = e + a6 * d6[i]
-    for q in range(7, nh):
-        aq = coefs[nh - 1, q]
-        dq = ring[_back(head, q, K)]
-        for i in range(S):
-            X[i] = X[i] + aq * dq[i]
-    for i in range(S):
-        X[i] = W[i] + X[i]
+    # more offsets (a least-squares start fits up to 16): the first seven written out as
+    # above, each further one added in turn, chunk by chunk so that X's chunk stays in cache
+    for c0 in range(0, S, _GUESS_CHUNK):
+        c1 = min(S, c0 + _GUESS_CHUNK)
+        for i in range(c0, c1):
+            e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
+            X[i] = e + a6 * d6[i]
+        for q in range(7, nh):
+            aq = coefs[nh - 1, q]
+            dq = ring[_back(head, q, K)]
+            for i in range(c0, c1):
+                X[i] = X[i] + aq * dq[i]
+        for i in range(c0, c1):
+            X[i] = W[i] + X[i]
     return sumsq(W)
 
 

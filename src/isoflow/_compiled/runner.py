@@ -31,7 +31,8 @@ from .._stepping import Runner
 from ..kernels import CompiledB
 from ..methods import Composition, Method, Strang
 from ..methods import composition as _composition
-from ..methods.isomp import extrapolation_weights, pack_state, state_parts
+from ..methods._fitted_start import start_weights
+from ..methods.isomp import pack_state, state_parts
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
 from . import driver
@@ -164,9 +165,10 @@ class CompiledRunner(Runner):
         self.solver = SolverConstants.of(method.solver)
         self.kmax = stage.offsets(method, problem)
         K = max(self.kmax, 1)
+        degree = stage.start_degree(method, problem)
         self.coefs = np.zeros((K, K))
         for m in range(1, K + 1):
-            self.coefs[m - 1, :m] = extrapolation_weights(m)
+            self.coefs[m - 1, :m] = start_weights(degree, m)
         self.gammas = gammas
         P = gammas.shape[0]
         self.W = layout.to_units(np.asarray(y).reshape(self.M, *self.core))

@@ -94,6 +94,10 @@ def _no_offsets(method: Any, problem: Any) -> int:
     return 0
 
 
+def _interpolating(method: Any, problem: Any) -> int | None:
+    return None
+
+
 def _no_params(
     method: Any, problem: Any, layout: Layout, steps: tuple[float, ...]
 ) -> tuple[Any, ...]:
@@ -132,6 +136,11 @@ class CompiledStage:
         (the order may depend on the problem's space; ``0``: the solve starts from the
         state). The method state is then ``(h, D_1, D_2, ...)``, newest
         first, as :class:`isoflow.IsoMP` keeps it.
+    start_degree : callable
+        ``(method, problem) -> int or None``: the degree of the polynomial the start fits to
+        the offsets (least squares once there are more than ``degree + 1``,
+        :func:`isoflow.methods._fitted_start.start_weights`); ``None``: interpolation
+        through all of them.
     params : callable
         ``(method, problem, layout, steps) -> tuple``: the method's parameters as the stage
         reads them (arrays in the layout's units), for a run whose substeps have the lengths
@@ -171,6 +180,7 @@ class CompiledStage:
     needs: frozenset[str]
     nwork: int
     offsets: Callable[[Any, Any], int] = _no_offsets
+    start_degree: Callable[[Any, Any], int | None] = _interpolating
     params: Callable[[Any, Any, Layout, tuple[float, ...]], tuple[Any, ...]] = _no_params
     begin: Any = None
     begin_moves_state: bool = True
@@ -238,7 +248,11 @@ def _dense_blas_rows(layout: Layout) -> int:
 def _isomp_offsets(method: IsoMP, problem: Any) -> int:
     if method.initial_guess != "extrapolate":
         return 0
-    return method.order_for(problem.algebra) + 1
+    return method.window_for(problem.algebra)
+
+
+def _isomp_degree(method: IsoMP, problem: Any) -> int:
+    return method.order_for(problem.algebra)
 
 
 def _smm_offsets(method: SphericalMidpoint, problem: Any) -> int:
@@ -254,6 +268,7 @@ register(
         frozenset({"evaluate_B", "stage_map", "advance_state"}),
         isomp.NWORK,
         offsets=_isomp_offsets,
+        start_degree=_isomp_degree,
         compensated=lambda method: bool(method.compensated),
         specializations={
             DenseBlas: Specialization(
@@ -364,6 +379,7 @@ register(
         frozenset({"evaluate_B", "stage_map", "advance_state"}),
         isomp.NWORK,
         offsets=lambda method, problem: _isomp_offsets(method.base, problem),
+        start_degree=lambda method, problem: _isomp_degree(method.base, problem),
         params=split.params,
         begin=split.begin,
         step_data=_method_step_data,
