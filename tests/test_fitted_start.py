@@ -11,7 +11,7 @@ import pytest
 import isoflow as iso
 from helpers import assert_same_run, compiled_and_numpy
 from isoflow.methods import isomp
-from isoflow.methods._fitted_start import (
+from isoflow.methods.extrapolation import (
     interpolation_weights,
     least_squares_weights,
     start_weights,
@@ -60,25 +60,22 @@ def test_start_weights_interpolate_until_the_window_exceeds_the_degree() -> None
         least_squares_weights(6, 6)
 
 
-def test_defaults_by_space() -> None:
-    """The least-squares start on dense matrices from n = 512 (degree 8 on 16 offsets, degree 6
-    on 12 from n = 1024), interpolation elsewhere, and what a given degree or window does."""
+def test_the_default_interpolates_and_a_window_fits() -> None:
+    """Without a window the start interpolates (as before the window existed); a window fits
+    the default degree (at most window - 1) or the one given."""
     alg = iso.algebras
-    assert isomp.default_extrapolation(alg.su(64)) == (6, 7)
-    assert isomp.default_extrapolation(alg.su(511)) == (6, 7)
-    assert isomp.default_extrapolation(alg.su(512)) == (8, 16)
-    assert isomp.default_extrapolation(alg.so(700)) == (8, 16)
-    assert isomp.default_extrapolation(alg.su(1024)) == (6, 12)
-    assert isomp.default_extrapolation(alg.so3_vectors(4096)) == (4, 5)
     m = iso.IsoMP()
-    assert (m.order_for(alg.su(512)), m.window_for(alg.su(512))) == (8, 16)
-    given = iso.IsoMP(extrapolation_order=3)  # a degree alone interpolates, as before
+    assert (m.order_for(alg.su(512)), m.window_for(alg.su(512))) == (6, 7)
+    assert (m.order_for(alg.su(1024)), m.window_for(alg.su(1024))) == (4, 5)
+    given = iso.IsoMP(extrapolation_order=3)
     assert (given.order_for(alg.su(512)), given.window_for(alg.su(512))) == (3, 4)
     window = iso.IsoMP(extrapolation_window=5)  # the default degree, at most window - 1
     assert (window.order_for(alg.su(512)), window.window_for(alg.su(512))) == (4, 5)
-    assert (window.order_for(alg.su(64)), window.window_for(alg.su(64))) == (4, 5)
+    wide = iso.IsoMP(extrapolation_window=16)
+    assert (wide.order_for(alg.su(64)), wide.window_for(alg.su(64))) == (6, 16)
     both = iso.IsoMP(extrapolation_order=9, extrapolation_window=16)
     assert (both.order_for(alg.su(8)), both.window_for(alg.su(8))) == (9, 16)
+    assert isomp.resolve_extrapolation(None, None, alg.so3_vectors(10)) == (4, 5)  # particle states
 
 
 @pytest.mark.parametrize(

@@ -31,7 +31,7 @@ from .._stepping import Runner
 from ..kernels import CompiledB
 from ..methods import Composition, Method, Strang
 from ..methods import composition as _composition
-from ..methods._fitted_start import start_weights
+from ..methods.extrapolation import start_weights
 from ..methods.isomp import pack_state, state_parts
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem

@@ -125,14 +125,11 @@ from ..algebras._vectors import ParticleVectors
 from ..nonlinear import FixedPoint, FixedPointProblem, NonlinearSolver
 from ..problems import IsospectralProblem
 from ._base import Method, StepResult, check_implicit_options
-from ._fitted_start import interpolation_weights as extrapolation_weights
-from ._fitted_start import start_weights
+from .extrapolation import interpolation_weights as extrapolation_weights
+from .extrapolation import start_weights
 
 __all__ = [
     "CAYLEY_RTOL",
-    "LEAST_SQUARES_MIN_N",
-    "LEAST_SQUARES_START",
-    "LEAST_SQUARES_START_LARGE",
     "MAX_EXTRAPOLATION_WINDOW",
     "UPDATES",
     "IsoMP",
@@ -141,7 +138,6 @@ __all__ = [
     "check_update_space",
     "check_window",
     "compensated_update",
-    "default_extrapolation",
     "default_extrapolation_order",
     "extrapolation_weights",
     "pack_state",
@@ -177,7 +173,7 @@ class IsoMP(Method):
         an ``O(h^{p+2})`` error: with ``p = 3`` the paper's rigid body (``h = 0.1``) needs
         about 30-40% fewer fixed-point iterations than from ``W_k``; or, with an
         ``extrapolation_window`` ``K > p + 1``, by the least-squares polynomial of degree ``p``
-        through the last ``K`` offsets (:mod:`isoflow.methods._fitted_start`). The first
+        through the last ``K`` offsets (:mod:`isoflow.methods.extrapolation`). The first
         steps use the offsets available (none: ``W_k``). The answer is the same fixed point.
     extrapolation_order : int or None
         Polynomial degree ``p`` of the extrapolation, ``0 <= p <= 7`` (``0`` reuses the
@@ -201,12 +197,14 @@ class IsoMP(Method):
         squares, whose error is of the same order in ``h`` with a larger constant but which
         multiplies the offsets' own errors (their rounding) far less (13.3 against 58.6 for
         degree 8 on 16 offsets against degree 6 interpolating). With a window,
-        ``extrapolation_order`` may go up to ``K - 1``. Default ``None``: ``p + 1`` when
-        ``extrapolation_order`` is given, else :func:`default_extrapolation` of the space,
-        which fits degree 8 to 16 offsets on dense matrix states with
-        ``512 <= n < 1024`` (Euler on the sphere at ``N = 512``, ``h ||B||_2 = 0.3``: 2.3
-        iterations a step over 50 steps against 3.1, two a step once the window is full;
-        ``docs/user_guide/solvers.rst``).
+        ``extrapolation_order`` may go up to ``K - 1``. Default ``None``: ``p + 1``
+        (interpolation). Where the offsets' rounding limits the start, the fit saves
+        iterations: Euler on the sphere at ``h ||B||_2 = 0.3`` with degree 8 on 16 offsets
+        takes 2.3 iterations a step over 50 steps at ``N = 512`` against 3.1 (about two once
+        the window is full), with degree 6 on 12 offsets 1.9 over 40 steps at ``N = 1024``
+        against 2.5. Where the interpolating start is already accepted at once it only adds
+        the longer sum (a linear ``u(512)`` field at one iteration a step: 51 against 43 ms a
+        step), hence not the default (``docs/user_guide/solvers.rst``).
     compensated : bool
         Carry the rounding error of the update ``W_{k+1} = W_k + hC`` to the next step
         (compensated summation, see the module docstring; default ``True``). The method state
@@ -428,7 +426,7 @@ class IsoMP(Method):
         order : int or None
             The degree fitted (:meth:`order_for`): interpolation through the offsets while
             there are at most ``order + 1``, least squares beyond; ``None`` interpolates
-            them all (:func:`~isoflow.methods._fitted_start.start_weights`).
+            them all (:func:`~isoflow.methods.extrapolation.start_weights`).
 
         Returns
         -------
@@ -653,17 +651,17 @@ LARGE_MATRIX_N = 1024
 
 
 def default_extrapolation_order(algebra: Algebra) -> int:
-    """IsoMP's extrapolation order on ``algebra`` when none is given.
+    """The degree of the extrapolated start on ``algebra`` when none is given (IsoMP's,
+    IsoSyRK's).
 
     4 on particle states (spaces of 3-vectors such as :func:`~isoflow.algebras.so3_vectors`:
     spin chains and lattices, vortices), where one iteration streams the state a few times and
     each further offset costs about as much as it saves; 6 on matrix states (and pairs or
     stacks of them) below ``n = LARGE_MATRIX_N``, where an iteration is a few matrix products;
-    4 again from there:
-    a state that large carries modes whose frequency times the step is near 1, which a
-    polynomial extrapolation amplifies the more the higher its degree (Euler on the sphere at
-    ``N = 1024``, ``h ||B||_2 = 0.3``: 2.70 iterations a step with degree 4, 3.07 with 6;
-    ``docs/user_guide/solvers.rst`` has the measurements).
+    4 again from there, where an interpolation of higher degree amplifies the offsets'
+    errors more than it gains (Euler on the sphere at ``N = 1024``, ``h ||B||_2 = 0.3``: 2.70
+    iterations a step with degree 4, 3.07 with 6; ``docs/user_guide/solvers.rst`` has the
+    measurements).
     """
     base = algebra
     while isinstance(getattr(base, "base", None), Algebra):  # stacks and pairs of a space
@@ -681,38 +679,6 @@ def resolve_extrapolation_order(order: int | None, algebra: Algebra) -> int:
 
 #: The most offsets :class:`IsoMP`'s start may fit (``extrapolation_window``).
 MAX_EXTRAPOLATION_WINDOW = 16
-#: Dense matrix states from this size on fit their start by least squares by default
-#: (:func:`default_extrapolation`).
-LEAST_SQUARES_MIN_N = 512
-#: The default least-squares starts ``(p, K)``: degree 8 through 16 offsets below
-#: :data:`LARGE_MATRIX_N`, degree 6 through 12 from there.
-LEAST_SQUARES_START = (8, 16)
-LEAST_SQUARES_START_LARGE = (6, 12)
-
-
-def default_extrapolation(algebra: Algebra) -> tuple[int, int]:
-    r"""IsoMP's start on ``algebra`` when neither degree nor window is given: ``(p, K)``.
-
-    On a dense matrix space (not a stack or pair of them) from ``n = LEAST_SQUARES_MIN_N``
-    the least-squares start (:data:`LEAST_SQUARES_START`, :data:`LEAST_SQUARES_START_LARGE`
-    from ``n = LARGE_MATRIX_N``): there the offsets' rounding, amplified by the interpolating
-    polynomial, limits the start rather than its truncation error. Euler on the sphere at
-    ``h ||B||_2 = 0.3`` (``docs/user_guide/solvers.rst``): at ``N = 512`` the degree-6
-    interpolating start leaves :math:`7 \cdot 10^{-14} \|W\|` and three iterations a step,
-    degree 8 fitted to 16 offsets :math:`1.3 \cdot 10^{-14} \|W\|` and 1.9; at
-    ``N = 1024`` degree 4 interpolating takes 2.0, degree 6 fitted to 12 offsets 1.2. Elsewhere
-    the interpolating start of degree :func:`default_extrapolation_order` (``K = p + 1``):
-    below ``n = 512`` the truncation error dominates and a longer fit loses (``N = 256``:
-    4.75 iterations a step with degree 8 on 16 offsets against 4.56).
-    """
-    p = default_extrapolation_order(algebra)
-    n = algebra.shape[-1]
-    plain_matrices = not isinstance(algebra, ParticleVectors) and not isinstance(
-        getattr(algebra, "base", None), Algebra
-    )
-    if plain_matrices and n >= LEAST_SQUARES_MIN_N:
-        return LEAST_SQUARES_START if n < LARGE_MATRIX_N else LEAST_SQUARES_START_LARGE
-    return p, p + 1
 
 
 def resolve_extrapolation(
@@ -720,17 +686,16 @@ def resolve_extrapolation(
 ) -> tuple[int, int]:
     """IsoMP's start ``(p, K)``: degree and offsets fitted.
 
-    Both ``None``: :func:`default_extrapolation`. ``window`` ``None``: ``(order, order + 1)``
-    (interpolation). ``order`` ``None`` with a window: the default degree for the space,
-    at most ``window - 1``.
+    ``window`` ``None``: ``(p, p + 1)``, interpolation, with ``p`` the ``order`` or
+    :func:`default_extrapolation_order` of the space. ``order`` ``None`` with a window: the
+    default degree for the space, at most ``window - 1``.
     """
+    p = resolve_extrapolation_order(order, algebra)
     if window is None:
-        if order is None:
-            return default_extrapolation(algebra)
-        return int(order), int(order) + 1
+        return p, p + 1
     if order is None:
-        return min(default_extrapolation(algebra)[0], int(window) - 1), int(window)
-    return int(order), int(window)
+        return min(p, int(window) - 1), int(window)
+    return p, int(window)
 
 
 def check_window(order: object, window: object) -> None:

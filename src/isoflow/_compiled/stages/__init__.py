@@ -139,7 +139,7 @@ class CompiledStage:
     start_degree : callable
         ``(method, problem) -> int or None``: the degree of the polynomial the start fits to
         the offsets (least squares once there are more than ``degree + 1``,
-        :func:`isoflow.methods._fitted_start.start_weights`); ``None``: interpolation
+        :func:`isoflow.methods.extrapolation.start_weights`); ``None``: interpolation
         through all of them.
     params : callable
         ``(method, problem, layout, steps) -> tuple``: the method's parameters as the stage
