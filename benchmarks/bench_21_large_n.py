@@ -20,19 +20,21 @@ against an older commit, and the thread scaling of one iteration.
    ``threads=2`` ran before) recorded beside, timed after the others (an OpenBLAS thread spins
    on its core for a while after each call).
 
-Part 1 also runs this checkout with the start fitted by least squares to the last offsets
-(:data:`FITTED_STARTS`, ``docs/user_guide/solvers.rst``; the baseline with its default).
 **Measured** (Intel Xeon host, idle, 2026-11-28 08:08-08:37 UTC, ``python
-benchmarks/run_all.py --only 13,21`` at ``34bde4d``, where the fit was briefly the default):
-**0.66 at N = 512 and 0.14 at N = 1024 with one thread** (0.66 and 0.12 with two), 2.3 and
-1.82 iterations a step against 4.28 and 3.32, the same energy error (6.17e-6, 3.08e-6) and
-Casimir drift (1.7e-15, 1.2e-15) as the old code. What is left at N = 512: the first steps,
-which have few offsets to fit (11, 8, 6, 5, 4, 3, 3 iterations, then 1-2: 40 of the 115
-iterations), the six saved states' eigenvalues (the same for both codes), and the start's sum
-over 16 offsets (about 7 ms a step, streamed from memory). Part 2 with the fit read 1.47x and
-1.49x in that run and 1.54-1.79x (N = 512) and 1.73x (N = 1024) in three runs minutes later
-with nothing else changed (the host's other tenants): with two iterations a step or fewer the
-step's serial work (the start, the finish) weighs on each iteration more than with three.
+benchmarks/run_all.py --only 13,21``), after the start of dense matrices from ``n = 512`` came
+to fit 16 (from ``n = 1024``: 12) offsets by least squares (``docs/user_guide/solvers.rst``;
+that run had the fit without the fallback to the interpolating start, which Euler's start
+never takes, and which adds a pass of about 2.7 ms a step at N = 512: 0.68 in a rerun of part
+1 at N = 512 at 09:10 UTC): part 1 **0.66 at N = 512 and 0.14 at N = 1024 with one thread**
+(0.66 and 0.12 with two), 2.3 and 1.82 iterations a step against 4.28 and 3.32, the same
+energy error (6.17e-6, 3.08e-6) and Casimir drift (1.7e-15, 1.2e-15) as the old code. What is
+left at N = 512: the first steps, which have few offsets to fit (11, 8, 6, 5, 4, 3, 3
+iterations, then 1-2: 40 of the 115 iterations), the six saved states' eigenvalues (the same
+for both codes), and the start's sum over 16 offsets (about 8 ms a step, streamed from
+memory). Part 2 read 1.47x and 1.49x in that run and 1.54-1.79x (N = 512) and 1.73x
+(N = 1024) in three runs minutes later with nothing else changed (the host's other tenants):
+with two iterations a step or fewer the step's serial work (the start, the finish) weighs on
+each iteration more than with three.
 
 Measured (Intel Xeon host, AVX-512, idle, 2026-11-28 03:23-03:47 UTC, ``python
 benchmarks/run_all.py --only 12,21``), after the pieces went to numba threads and the dense
@@ -135,12 +137,6 @@ import numpy as np
 
 from suite import StepTimer, benchmark, record
 
-#: IsoMP's start fitted by least squares, as ``docs/user_guide/solvers.rst`` recommends it for
-#: Euler on the sphere from ``N = 512`` (part 1's extra rows).
-FITTED_STARTS = {
-    512: {"extrapolation_order": 8, "extrapolation_window": 16},
-    1024: {"extrapolation_order": 6, "extrapolation_window": 12},
-}
 #: The commit before issue 24 (the planar 3M stage).
 BASELINE_REV = os.environ.get("ISOFLOW_BASELINE_REV", "59b7df7")
 STEPS = 50
@@ -153,13 +149,12 @@ from threadpoolctl import threadpool_limits
 threadpool_limits(1)
 import isoflow as iso
 N, steps, threads = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
-method = iso.IsoMP(**json.loads(sys.argv[4]))
 prob, W0 = iso.models.euler_sphere(N=N, seed=1)
 h = float(0.3 / np.linalg.norm(prob.B(W0), 2))
 kw = dict(progress=False, threads=threads)
-iso.solve(prob, method, W0, dt=h, n_steps=1, **kw)  # compile or load the cache
+iso.solve(prob, iso.IsoMP(), W0, dt=h, n_steps=1, **kw)  # compile or load the cache
 t = time.perf_counter()
-sol = iso.solve(prob, method, W0, dt=h, n_steps=steps, save_every=max(1, steps // 5),
+sol = iso.solve(prob, iso.IsoMP(), W0, dt=h, n_steps=steps, save_every=max(1, steps // 5),
                 **kw)  # diagnostics (eigenvalues) of a few states, not of every step
 seconds = time.perf_counter() - t
 H = np.asarray(sol.diagnostics.hamiltonian)
@@ -188,36 +183,24 @@ def _baseline_src(rev: str) -> Path | None:
     return dest / "src"
 
 
-def _probe(
-    src: Path | None, N: int, steps: int, threads: int = 1, start: dict[str, int] | None = None
-) -> dict[str, Any]:
+def _probe(src: Path | None, N: int, steps: int, threads: int = 1) -> dict[str, Any]:
     """One run with ``threads`` cores (``solve(threads=...)``) in a fresh process of the
-    package in ``src`` (the baseline), else of this checkout's; ``start``: IsoMP's keywords
-    (``extrapolation_order``, ``extrapolation_window``), the default's if ``None``."""
+    package in ``src`` (the baseline), else of this checkout's."""
     here = Path(__file__).resolve().parents[1] / "src"
     env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
     env["PYTHONPATH"] = str(src or here)
     out = subprocess.run(
-        [sys.executable, "-c", _PROBE, str(N), str(steps), str(threads), json.dumps(start or {})],
+        [sys.executable, "-c", _PROBE, str(N), str(steps), str(threads)],
         capture_output=True, text=True, env=env, check=True,
     )  # fmt: skip
     return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
-def _against_baseline(
-    N: int, steps: int, threads: int = 1, start: dict[str, int] | None = None
-) -> dict[str, Any]:
-    """Part 1; ``start``: this checkout's IsoMP keywords (the baseline runs its default)."""
+def _against_baseline(N: int, steps: int, threads: int = 1) -> dict[str, Any]:
     src = _baseline_src(BASELINE_REV)
-    fitted = (
-        f", IsoMP(extrapolation_order={start['extrapolation_order']}, "
-        f"extrapolation_window={start['extrapolation_window']})"
-        if start
-        else ""
-    )
     name = (
-        f"euler_sphere N = {N}, h ||B|| = 0.3, {steps} steps, threads={threads}{fitted}: time "
-        f"per simulated time / {BASELINE_REV}"
+        f"euler_sphere N = {N}, h ||B|| = 0.3, {steps} steps, threads={threads}: time per "
+        f"simulated time / {BASELINE_REV}"
     )
     if src is None:
         why = f"the baseline commit {BASELINE_REV} is not available (git archive)"
@@ -225,7 +208,7 @@ def _against_baseline(
                       why=why)  # fmt: skip
     runs: dict[str, list[dict[str, float]]] = {"new": [], "old": []}
     for _ in range(REPEATS):
-        runs["new"].append(_probe(None, N, steps, threads, start))
+        runs["new"].append(_probe(None, N, steps, threads))
         runs["old"].append(_probe(src, N, steps, threads))
     best = {k: min(v, key=lambda r: r["seconds_per_time"]) for k, v in runs.items()}
     ratio = best["new"]["seconds_per_time"] / best["old"]["seconds_per_time"]
@@ -315,8 +298,6 @@ def run(quick: bool) -> list[dict[str, Any]]:
     sizes = (256,) if quick else (512, 1024)
     steps = 10 if quick else STEPS
     out = [_against_baseline(N, steps, threads) for N in sizes for threads in (1, 2)]
-    if not quick:  # the start fitted to the offsets (docs/user_guide/solvers.rst), one thread
-        out += [_against_baseline(N, steps, 1, FITTED_STARTS[N]) for N in sizes]
     out += [_thread_scaling(N) for N in sizes]
     return out
 

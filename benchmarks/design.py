@@ -32,13 +32,15 @@ load on a shared machine only ever adds time).
     scales worse than ``zgemm``.
 13. Iterations per step, Euler on the sphere (random smooth vorticity, ``h ||B||_2 = 0.3``,
     ``rtol = 1e-14``, 40 steps): IsoMP's default start (the value; degree 6 interpolating the
-    offsets ``G(X) - W`` below ``n = 1024``), the cubic, quartic, degree-6 and degree-7
-    interpolating ones, degree 8 fitted to 16 offsets (``extrapolation_window=16``), Anderson
+    offsets ``G(X) - W`` below ``n = 512``, from there degree 8 fitted to 16 of them with the
+    interpolating start as fallback), the cubic, quartic, degree-6 and degree-7 interpolating
+    ones, degree 8 fitted to 16 offsets (``extrapolation_window=16``, no fallback), Anderson
     mixing with the quartic and the default start, against the start ``X = W`` (target at most
     10), with each run's time over the cubic start's; and on the paper's rigid body. Its first
     steps, with fewer offsets, weigh more than in a long run (until 2026-11-28 the benchmark
-    took 12 steps from ``N = 512``). Measured 2026-11-28 (08:08 UTC, idle): at ``N = 512`` 3.15
-    iterations a step with the default, 2.45 with the fit (0.77 and 0.65 of the cubic start's
+    took 12 steps from ``N = 512``). Measured 2026-11-28 (08:08 UTC, idle, the fit then without
+    its fallback, which Euler's start never takes): at ``N = 512`` 2.45 iterations a step with
+    the fit against 3.15 with the degree-6 interpolation (0.62 and 0.77 of the cubic start's
     time). The measurements behind the default (50 steps, 30 at ``N = 1024``) are in
     ``docs/user_guide/solvers.rst``; before the offsets were taken from ``G(X)`` (issue 24,
     lever 2, load 2.5-3.3): cubic / quartic / quintic / quartic + Anderson 2 / quintic +

@@ -60,22 +60,76 @@ def test_start_weights_interpolate_until_the_window_exceeds_the_degree() -> None
         least_squares_weights(6, 6)
 
 
-def test_the_default_interpolates_and_a_window_fits() -> None:
-    """Without a window the start interpolates (as before the window existed); a window fits
-    the default degree (at most window - 1) or the one given."""
+def test_defaults_by_space() -> None:
+    """Dense matrices from n = 512 fit their start (degree 8 on 16 offsets, degree 6 on 12
+    from n = 1024) with the interpolating start of the default degree as fallback; elsewhere,
+    and whenever a degree or window is given, no fallback."""
     alg = iso.algebras
+    assert isomp.default_start(alg.su(64)) == (6, 7, 0)
+    assert isomp.default_start(alg.su(511)) == (6, 7, 0)
+    assert isomp.default_start(alg.su(512)) == (8, 16, 7)
+    assert isomp.default_start(alg.so(700)) == (8, 16, 7)
+    assert isomp.default_start(alg.su(1024)) == (6, 12, 5)
+    assert isomp.default_start(alg.so3_vectors(4096)) == (4, 5, 0)
     m = iso.IsoMP()
-    assert (m.order_for(alg.su(512)), m.window_for(alg.su(512))) == (6, 7)
-    assert (m.order_for(alg.su(1024)), m.window_for(alg.su(1024))) == (4, 5)
-    given = iso.IsoMP(extrapolation_order=3)
-    assert (given.order_for(alg.su(512)), given.window_for(alg.su(512))) == (3, 4)
+    su512 = alg.su(512)
+    assert (m.order_for(su512), m.window_for(su512), m.fallback_for(su512)) == (8, 16, 7)
+    given = iso.IsoMP(extrapolation_order=3)  # a degree alone interpolates, as before
+    assert (given.order_for(su512), given.window_for(su512), given.fallback_for(su512)) == (
+        3, 4, 0,
+    )  # fmt: skip
     window = iso.IsoMP(extrapolation_window=5)  # the default degree, at most window - 1
-    assert (window.order_for(alg.su(512)), window.window_for(alg.su(512))) == (4, 5)
-    wide = iso.IsoMP(extrapolation_window=16)
+    assert (window.order_for(su512), window.window_for(su512), window.fallback_for(su512)) == (
+        4, 5, 0,
+    )  # fmt: skip
+    wide = iso.IsoMP(extrapolation_window=16)  # a window given is always fitted
     assert (wide.order_for(alg.su(64)), wide.window_for(alg.su(64))) == (6, 16)
+    assert wide.fallback_for(su512) == 0
     both = iso.IsoMP(extrapolation_order=9, extrapolation_window=16)
     assert (both.order_for(alg.su(8)), both.window_for(alg.su(8))) == (9, 16)
-    assert isomp.resolve_extrapolation(None, None, alg.so3_vectors(10)) == (4, 5)  # particle states
+
+
+def _linear(alg, seed: int = 1) -> tuple:
+    """Benchmark 3's field: ``B = C * W`` entrywise, a start accepted at once (1.2 iterations a
+    step at ``h = 0.1``)."""
+    n = alg.shape[0]
+    d = np.linspace(0.5, 1.5, n)
+    C = -(d[:, None] + d[None, :]) / 2
+    prob = iso.IsospectralProblem(algebra=alg, kernel=iso.ElementwiseLinear(C))
+    return prob, alg.random(seed=seed, scale=1.0 / n)
+
+
+@pytest.fixture
+def fitted_from_16(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The default's fitted start (with its fallback) from n = 16 instead of 512."""
+    monkeypatch.setattr(isomp, "FITTED_START_MIN_N", 16)
+
+
+@pytest.mark.usefixtures("fitted_from_16")
+def test_the_fallback_keeps_a_start_that_suffices() -> None:
+    """Where the interpolating start predicts every offset within half the tolerance, the
+    default's fit falls back to it at every step: the run equals the interpolating one bit for
+    bit (the fallback computes that start as the interpolating guess does), on the compiled
+    path and on the NumPy path."""
+    prob, W0 = _linear(iso.algebras.u(24))
+    assert iso.IsoMP().fallback_for(prob.algebra) == 7
+    kw = dict(dt=0.1, n_steps=40, save_every=10, progress=False)
+    auto = iso.solve(prob, iso.IsoMP(), W0, **kw)
+    interp = iso.solve(prob, iso.IsoMP(extrapolation_order=6), W0, **kw)
+    assert auto.stats.runner.startswith("compiled")
+    assert auto.ys.tobytes() == interp.ys.tobytes()
+    a, b = compiled_and_numpy(prob, iso.IsoMP(), W0, 0.1, 40, save_every=10)
+    assert_same_run(a, b)
+
+
+@pytest.mark.usefixtures("fitted_from_16")
+@pytest.mark.parametrize("N", [16, 40])
+def test_the_default_fit_runs_the_same_on_both_paths(N: int) -> None:
+    """Euler on the sphere, where the fit is taken (the interpolating start misses by more
+    than half the tolerance): compiled and NumPy agree to 1e-13, iterations within 1 %."""
+    prob, W0, h = _sphere(N)
+    a, b = compiled_and_numpy(prob, iso.IsoMP(), W0, h, 40, save_every=8, chunks=(9, 13))
+    assert_same_run(a, b, iters_exact=False)
 
 
 @pytest.mark.parametrize(
@@ -142,3 +196,40 @@ def test_where_rounding_limits_the_start_the_fit_saves_iterations() -> None:
         interp.stats.n_iterations,
     )
     assert np.max(np.abs(fit.y_final - interp.y_final)) <= 1e-13 * np.max(np.abs(W0))
+
+
+@pytest.mark.usefixtures("fitted_from_16")
+@pytest.mark.parametrize("case", ["sphere", "linear"])
+def test_a_killed_run_with_the_fitted_start_resumes_bit_for_bit(tmp_path, case: str) -> None:
+    """The start (fit or fallback) depends only on the state and the offsets a checkpoint
+    keeps: a run killed at any of several writes resumes to the same file bit for bit, with
+    the fit taken (Euler on the sphere) and with the fallback taken (a linear field)."""
+    from helpers import disk_before_each_write
+    from isoflow import io
+
+    if case == "sphere":
+        prob, W0, h = _sphere(20)
+    else:
+        (prob, W0), h = _linear(iso.algebras.so(20)), 0.1
+    path = tmp_path / "run.h5"
+    with disk_before_each_write(path) as copies:
+        sol = iso.solve(
+            prob, iso.IsoMP(), W0, dt=h, n_steps=40, save_every=2, progress=False,
+            writer=io.HDF5Writer(path, chunk_rows=2, flush_seconds=0.0),
+        )  # fmt: skip
+    assert sol.success and sol.stats.runner.startswith("compiled")
+    ref = io.load(path)
+    kills = []  # the first copies from steps 20 and 30: past the window of 16, before the end
+    for i in range(0, len(copies), 4):
+        part = tmp_path / f"kill{i}.h5"
+        part.write_bytes(copies[i])
+        step = io.load(part).step
+        if step >= (20 if not kills else 30) and step < 40:
+            kills.append(part)
+            if len(kills) == 2:
+                break
+    assert len(kills) == 2
+    for part in kills:
+        resumed = io.resume(part, problem=prob, method=iso.IsoMP(), progress=False)
+        assert resumed.success
+        assert io.load(part).ys.tobytes() == ref.ys.tobytes()

@@ -15,7 +15,9 @@ where the stage (:mod:`isoflow._compiled.stages`) evaluates ``G`` per lane with 
 output (``iterate``) and the new state (``finish``). Everything else exists here once:
 
 * the extrapolated initial guess and the ring of stage offsets (:mod:`isoflow._compiled.flat`),
-  one ring per substep position (substeps of different lengths keep separate histories);
+  one ring per substep position (substeps of different lengths keep separate histories); a
+  fitted start that falls back to the interpolating one where that would have predicted the
+  newest offset within half the tolerance (``plan.kint``, single-lane units);
 * the compensation of the update (``comp``, one per substep position: the rounding error
   the position's last addition left, handed to ``finish``; an empty buffer for a method that
   does not compensate, see :mod:`isoflow.methods.isomp`);
@@ -53,7 +55,7 @@ import numpy as np
 
 from . import blocks
 from .atomics import take
-from .flat import copy, guess, push
+from .flat import copy, guess, guess_or_fit, push
 from .rules import CONTINUE, STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE, stopping_step
 
 __all__ = [
@@ -284,8 +286,12 @@ def run_unit(  # type: ignore[no-untyped-def]
             hp = gammas[p] * h
             if plan.begin:
                 begin(f, fargs, lay, mp, sd, Wcur, work, hp)
-            guess(Wcur, ring[p], head[p], nh[p], coefs, X)
             blocks.lane_sumsq(lay, Wcur, scale2)
+            if plan.kint > 0 and L == 1 and nh[p] > plan.kint:
+                limit = 0.5 * (solver.atol + solver.rtol * math.sqrt(scale2[0]))
+                guess_or_fit(Wcur, ring[p], head[p], nh[p], coefs, plan.kint, limit, X)
+            else:
+                guess(Wcur, ring[p], head[p], nh[p], coefs, X)
             for q in range(L):
                 sc = math.sqrt(scale2[q])
                 tol[q] = solver.atol + solver.rtol * sc

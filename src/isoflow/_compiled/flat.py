@@ -184,6 +184,88 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
     return sumsq(W)
 
 
+@numba.njit(cache=True, inline="always")
+def _start_sum(base, e0, e1, e2, e3, e4, e5, e6, c, k, out):  # type: ignore[no-untyped-def]
+    """``out = base + sum_{q < k} c_q e_q`` for ``k = 5`` or ``7`` (the sum left to right)."""
+    c0, c1, c2, c3, c4 = c[0], c[1], c[2], c[3], c[4]
+    if k == 5:
+        for i in range(out.shape[0]):
+            out[i] = base[i] + (c0 * e0[i] + c1 * e1[i] + c2 * e2[i] + c3 * e3[i] + c4 * e4[i])
+    else:
+        c5, c6 = c[5], c[6]
+        for i in range(out.shape[0]):
+            x = c0 * e0[i] + c1 * e1[i] + c2 * e2[i] + c3 * e3[i] + c4 * e4[i] + c5 * e5[i]
+            out[i] = base[i] + (x + c6 * e6[i])
+
+
+@numba.njit(cache=True)
+def _interpolation_miss(W, ring, head, kint, c, X):  # type: ignore[no-untyped-def]
+    """``X = W + sum_{q < kint} c_q D_q`` (newest first) and, returned, the squared size of
+    ``D_0 - sum_{q < kint} c_q D_{q+1}``: how far the same start would have missed the newest
+    offset from the ones before it. ``X`` without reassociation (it moves the state, see the
+    module docstring), the size as a norm. Written out for the default fallbacks
+    (``kint = 5, 7``: every offset loaded once per entry, chunk by chunk), a pass per offset
+    else."""
+    S = W.shape[0]
+    K = ring.shape[0]
+    d0 = ring[head]
+    d1 = ring[_back(head, 1, K)]
+    d2 = ring[_back(head, 2, K)]
+    d3 = ring[_back(head, 3, K)]
+    d4 = ring[_back(head, 4, K)]
+    d5 = ring[_back(head, 5, K)]
+    if kint == 5 or kint == 7:
+        d6 = ring[_back(head, 6 if kint == 7 else 0, K)]
+        d7 = ring[_back(head, 7 if kint == 7 else 0, K)]
+        ebuf = np.empty(min(S, _GUESS_CHUNK), dtype=X.dtype)
+        negc = -c
+        acc = 0.0
+        for c0_ in range(0, S, _GUESS_CHUNK):
+            n = min(S, c0_ + _GUESS_CHUNK) - c0_
+            c1_ = c0_ + n
+            _start_sum(W[c0_:c1_], d0[c0_:c1_], d1[c0_:c1_], d2[c0_:c1_], d3[c0_:c1_],
+                       d4[c0_:c1_], d5[c0_:c1_], d6[c0_:c1_], c, kint, X[c0_:c1_])  # fmt: skip
+            _start_sum(d0[c0_:c1_], d1[c0_:c1_], d2[c0_:c1_], d3[c0_:c1_], d4[c0_:c1_],
+                       d5[c0_:c1_], d6[c0_:c1_], d7[c0_:c1_], negc, kint, ebuf[:n])  # fmt: skip
+            acc += sumsq(ebuf[:n])  # a norm: reassociated (module docstring)
+        return acc
+    for i in range(S):  # any other fallback: a pass per offset
+        X[i] = 0.0
+    total = 0.0
+    e = np.empty(S, dtype=X.dtype)
+    for i in range(S):
+        e[i] = d0[i]
+    for q in range(kint + 1):
+        dq = ring[_back(head, q, K)]
+        if q < kint:
+            cq = c[q]
+            for i in range(S):
+                X[i] = X[i] + cq * dq[i]
+        if q > 0:
+            cm = c[q - 1]
+            for i in range(S):
+                e[i] = e[i] - cm * dq[i]
+    for i in range(S):
+        X[i] = W[i] + X[i]
+        v = e[i]
+        total += v.real * v.real + v.imag * v.imag
+    return total
+
+
+@numba.njit(cache=True)
+def guess_or_fit(W, ring, head, nh, coefs, kint, limit, X):  # type: ignore[no-untyped-def]
+    """The start of a fitted stage (:func:`guess` with the fit's weights ``coefs[nh - 1]``),
+    unless the interpolating start on the newest ``kint`` offsets (weights ``coefs[-1]``)
+    would have predicted the newest offset from the ``kint`` before it within ``limit`` (half
+    the solve's tolerance): then that start, which reads fewer offsets. Needs ``nh > kint``.
+    Returns whether the interpolating start was taken."""
+    miss2 = _interpolation_miss(W, ring, head, kint, coefs[coefs.shape[0] - 1], X)
+    if miss2 <= limit * limit:
+        return True
+    guess(W, ring, head, nh, coefs, X)
+    return False
+
+
 @numba.njit(cache=True)
 def push(ring, slot, X, W):  # type: ignore[no-untyped-def]
     """Store the stage offset ``X - W`` in ``ring[slot]`` (the driver passes the map's value

@@ -63,6 +63,11 @@ class Plan(NamedTuple):
         Whether that part changes the state (a split step's half flow) and not only scratch
         rows: the driver then keeps the state a step starts from, to freeze a failed lane
         there.
+    kint : int
+        Offsets of the interpolating start a fitted start falls back to when it would have
+        predicted the newest offset within half the tolerance (its weights are the last row
+        of ``coefs``; :func:`isoflow._compiled.flat.guess_or_fit`); 0: the start is never
+        switched.
     """
 
     h: float
@@ -73,16 +78,17 @@ class Plan(NamedTuple):
     kmax: int
     begin: bool
     begin_moves: bool
+    kint: int = 0
 
     @classmethod
     def of(
         cls, h: float, nsteps: int, k0: int, grid: SaveGrid, kmax: int, begin: bool,
-        begin_moves: bool = True,
+        begin_moves: bool = True, kint: int = 0,
     ) -> Plan:  # fmt: skip
         """The plan of a call of ``nsteps`` steps from ``k0`` on ``grid``."""
         return cls(
             float(h), int(nsteps), int(k0), int(grid.every), int(grid.k_final), int(kmax),
-            bool(begin), bool(begin and begin_moves),
+            bool(begin), bool(begin and begin_moves), int(kint),
         )  # fmt: skip
 
 

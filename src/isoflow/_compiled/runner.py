@@ -31,7 +31,7 @@ from .._stepping import Runner
 from ..kernels import CompiledB
 from ..methods import Composition, Method, Strang
 from ..methods import composition as _composition
-from ..methods.extrapolation import start_weights
+from ..methods.extrapolation import interpolation_weights, start_weights
 from ..methods.isomp import pack_state, state_parts
 from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
@@ -166,9 +166,12 @@ class CompiledRunner(Runner):
         self.kmax = stage.offsets(method, problem)
         K = max(self.kmax, 1)
         degree = stage.start_degree(method, problem)
-        self.coefs = np.zeros((K, K))
+        self.kint = stage.start_fallback(method, problem) if self.kmax else 0
+        self.coefs = np.zeros((K + (1 if self.kint else 0), K))
         for m in range(1, K + 1):
             self.coefs[m - 1, :m] = start_weights(degree, m)
+        if self.kint:  # the interpolating start a fitted one falls back to (flat.guess_or_fit)
+            self.coefs[K, : self.kint] = interpolation_weights(self.kint)
         self.gammas = gammas
         P = gammas.shape[0]
         self.W = layout.to_units(np.asarray(y).reshape(self.M, *self.core))
@@ -420,7 +423,7 @@ class CompiledRunner(Runner):
         )
         plan = Plan.of(
             self.h, nsteps, k0, grid, self.kmax, self.impl.begin is not None,
-            self.impl.begin_moves_state,
+            self.impl.begin_moves_state, self.kint,
         )  # fmt: skip
         if data is None:
             data = self._step_data(k0, nsteps, members)

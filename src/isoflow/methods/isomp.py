@@ -130,6 +130,9 @@ from .extrapolation import start_weights
 
 __all__ = [
     "CAYLEY_RTOL",
+    "FITTED_START",
+    "FITTED_START_LARGE",
+    "FITTED_START_MIN_N",
     "MAX_EXTRAPOLATION_WINDOW",
     "UPDATES",
     "IsoMP",
@@ -139,6 +142,7 @@ __all__ = [
     "check_window",
     "compensated_update",
     "default_extrapolation_order",
+    "default_start",
     "extrapolation_weights",
     "pack_state",
     "resolve_extrapolation",
@@ -184,7 +188,8 @@ class IsoMP(Method):
         of the offsets. Default ``None``: :func:`default_extrapolation_order` of the state
         space, ``p = 6`` on matrix states below ``n = 1024`` (an iteration is a few matrix
         products, worth many passes over the offsets) and ``p = 4`` on larger ones and on
-        particle states (spins, vortices: an iteration is itself a few passes over memory).
+        particle states (spins, vortices: an iteration is itself a few passes over memory);
+        dense matrices from ``n = 512`` fit their start (``extrapolation_window``).
         Measured (one BLAS thread, ``rtol = 1e-14``, ``docs/user_guide/solvers.rst``): Euler
         on the sphere at ``h ||B||_2 = 0.3`` takes 7.52, 4.42, 3.10 iterations a step at
         ``N = 128, 256, 512`` with ``p = 6`` against 8.58, 5.68, 3.38 with ``p = 4`` (0.91,
@@ -197,14 +202,15 @@ class IsoMP(Method):
         squares, whose error is of the same order in ``h`` with a larger constant but which
         multiplies the offsets' own errors (their rounding) far less (13.3 against 58.6 for
         degree 8 on 16 offsets against degree 6 interpolating). With a window,
-        ``extrapolation_order`` may go up to ``K - 1``. Default ``None``: ``p + 1``
-        (interpolation). Where the offsets' rounding limits the start, the fit saves
-        iterations: Euler on the sphere at ``h ||B||_2 = 0.3`` with degree 8 on 16 offsets
-        takes 2.3 iterations a step over 50 steps at ``N = 512`` against 3.1 (about two once
-        the window is full), with degree 6 on 12 offsets 1.9 over 40 steps at ``N = 1024``
-        against 2.5. Where the interpolating start is already accepted at once it only adds
-        the longer sum (a linear ``u(512)`` field at one iteration a step: 51 against 43 ms a
-        step), hence not the default (``docs/user_guide/solvers.rst``).
+        ``extrapolation_order`` may go up to ``K - 1``; a window given is always fitted.
+        Default ``None``: ``p + 1`` (interpolation) when ``extrapolation_order`` is given,
+        else :func:`default_start` of the space: on dense matrices from ``n = 512`` degree 8
+        fitted to 16 offsets (degree 6 to 12 from ``n = 1024``), falling back step by step to
+        the interpolating start of the default degree wherever that would have predicted the
+        newest offset within half the tolerance (it reads fewer offsets). Euler on the sphere
+        at ``h ||B||_2 = 0.3``: 2.3 iterations a step over 50 steps at ``N = 512`` against
+        3.1 with the interpolating start; a linear field whose start is accepted at once keeps
+        the interpolating one (``docs/user_guide/solvers.rst``).
     compensated : bool
         Carry the rounding error of the update ``W_{k+1} = W_k + hC`` to the next step
         (compensated summation, see the module docstring; default ``True``). The method state
@@ -385,7 +391,12 @@ class IsoMP(Method):
         """The offsets the start fits on ``algebra`` (:func:`resolve_extrapolation`)."""
         return self._start(algebra)[1]
 
-    def _start(self, algebra: Algebra) -> tuple[int, int]:
+    def fallback_for(self, algebra: Algebra) -> int:
+        """The offsets of the interpolating start the fit falls back to on ``algebra``, 0 for
+        none (:func:`resolve_extrapolation`)."""
+        return self._start(algebra)[2]
+
+    def _start(self, algebra: Algebra) -> tuple[int, int, int]:
         return resolve_extrapolation(self.extrapolation_order, self.extrapolation_window, algebra)
 
     def history(self, h: float, state: Any, window: int) -> tuple[Array, ...]:
@@ -440,6 +451,27 @@ class IsoMP(Method):
             E = E + c * D
         return y + E
 
+    def _start_or_fallback(
+        self, alg: Algebra, y: Array, offsets: tuple[Array, ...], order: int, kint: int
+    ) -> Array:
+        """The fitted start, or per member the interpolating one on the newest ``kint``
+        offsets where that would have predicted the newest offset from the ``kint`` before it
+        within half the tolerance (the compiled loop's ``flat.guess_or_fit``)."""
+        a = extrapolation_weights(kint)
+        X_int = self.initial_stage(y, offsets[:kint])
+        miss = offsets[0] - a[0] * offsets[1]
+        for c, D in zip(a[1:], offsets[2 : kint + 1], strict=True):
+            miss = miss - c * D
+        axes = tuple(range(-len(alg.shape), 0))
+        size = np.sqrt(np.sum(np.abs(miss) ** 2, axis=axes))
+        scale = np.sqrt(np.sum(np.abs(y) ** 2, axis=axes))
+        solver: Any = self.solver
+        limit = 0.5 * (solver.atol + solver.rtol * scale)
+        fallback = np.reshape(size <= limit, size.shape + (1,) * len(alg.shape))
+        if np.all(fallback):
+            return X_int
+        return np.where(fallback, X_int, self.initial_stage(y, offsets, order))
+
     def step(
         self, problem: IsospectralProblem, y: Array, h: float, state: Any = None
     ) -> StepResult:
@@ -464,9 +496,12 @@ class IsoMP(Method):
             The new state, the stage ``X``, the solve record and the state for the next step.
         """
         alg = problem.algebra
-        order, window = self._start(alg)
+        order, window, kint = self._start(alg)
         offsets = self.history(h, state, window)
-        X0 = self.initial_stage(y, offsets, order)
+        if kint and len(offsets) > kint:
+            X0 = self._start_or_fallback(alg, y, offsets, order, kint)
+        else:
+            X0 = self.initial_stage(y, offsets, order)
         res = self.solver.solve(self.stage_problem(problem, y, h), X0)
         kept: tuple[Array, ...] = ()
         if self.initial_guess == "extrapolate":
@@ -681,21 +716,62 @@ def resolve_extrapolation_order(order: int | None, algebra: Algebra) -> int:
 MAX_EXTRAPOLATION_WINDOW = 16
 
 
+#: Dense matrix states from this size on fit their start by least squares by default
+#: (:func:`default_start`).
+FITTED_START_MIN_N = 512
+#: The default fit ``(p, K)`` there: degree 8 to 16 offsets below :data:`LARGE_MATRIX_N`, and
+#: degree 6 to 12 from there (:data:`FITTED_START_LARGE`).
+FITTED_START = (8, 16)
+FITTED_START_LARGE = (6, 12)
+
+
+def default_start(algebra: Algebra) -> tuple[int, int, int]:
+    r"""IsoMP's start on ``algebra`` when neither degree nor window is given: ``(p, K, k)``,
+    the polynomial of degree ``p`` fitted to ``K`` offsets, or, where ``k > 0``, the
+    interpolating start on ``k`` offsets whenever that would have predicted the newest offset
+    from the ``k`` before it within half the solve's tolerance.
+
+    On dense matrix spaces (not stacks or pairs of them) from ``n = FITTED_START_MIN_N``:
+    the fit :data:`FITTED_START` (:data:`FITTED_START_LARGE` from ``n = LARGE_MATRIX_N``)
+    with the interpolating start of degree :func:`default_extrapolation_order` as fallback.
+    There the offsets' rounding, which an interpolation of high degree amplifies, limits the
+    start (Euler on the sphere at ``N = 512``, ``h ||B||_2 = 0.3``: the degree-6
+    interpolation misses the stage by :math:`7 \cdot 10^{-14} \|W\|` and the solve takes
+    three iterations a step; the fit misses by :math:`1.3 \cdot 10^{-14} \|W\|`, two), while
+    where the interpolating start is accepted at once the fit's longer sum would only cost
+    (benchmark 3's linear fields, 1.2 iterations a step: 19-28 % a step): the fallback keeps
+    that start there (``docs/user_guide/solvers.rst``). Elsewhere ``(p, p + 1, 0)``, the
+    interpolating start of degree :func:`default_extrapolation_order`.
+    """
+    p = default_extrapolation_order(algebra)
+    n = algebra.shape[-1]
+    plain_matrices = not isinstance(algebra, ParticleVectors) and not isinstance(
+        getattr(algebra, "base", None), Algebra
+    )
+    if plain_matrices and n >= FITTED_START_MIN_N:
+        fp, K = FITTED_START if n < LARGE_MATRIX_N else FITTED_START_LARGE
+        return fp, K, p + 1
+    return p, p + 1, 0
+
+
 def resolve_extrapolation(
     order: int | None, window: int | None, algebra: Algebra
-) -> tuple[int, int]:
-    """IsoMP's start ``(p, K)``: degree and offsets fitted.
+) -> tuple[int, int, int]:
+    """IsoMP's start ``(p, K, k)``: degree, offsets fitted and the fallback's offsets (0:
+    none).
 
-    ``window`` ``None``: ``(p, p + 1)``, interpolation, with ``p`` the ``order`` or
-    :func:`default_extrapolation_order` of the space. ``order`` ``None`` with a window: the
-    default degree for the space, at most ``window - 1``.
+    Both ``None``: :func:`default_start`. ``window`` ``None``: ``(order, order + 1, 0)``
+    (interpolation). ``order`` ``None`` with a window: the default degree for the space, at
+    most ``window - 1``. A window given is always fitted (no fallback).
     """
-    p = resolve_extrapolation_order(order, algebra)
     if window is None:
-        return p, p + 1
+        if order is None:
+            return default_start(algebra)
+        return int(order), int(order) + 1, 0
+    p = resolve_extrapolation_order(order, algebra)
     if order is None:
-        return min(p, int(window) - 1), int(window)
-    return p, int(window)
+        return min(p, int(window) - 1), int(window), 0
+    return p, int(window), 0
 
 
 def check_window(order: object, window: object) -> None:

@@ -98,6 +98,10 @@ def _interpolating(method: Any, problem: Any) -> int | None:
     return None
 
 
+def _no_fallback(method: Any, problem: Any) -> int:
+    return 0
+
+
 def _no_params(
     method: Any, problem: Any, layout: Layout, steps: tuple[float, ...]
 ) -> tuple[Any, ...]:
@@ -141,6 +145,10 @@ class CompiledStage:
         the offsets (least squares once there are more than ``degree + 1``,
         :func:`isoflow.methods.extrapolation.start_weights`); ``None``: interpolation
         through all of them.
+    start_fallback : callable
+        ``(method, problem) -> int``: offsets of the interpolating start that a fitted one
+        takes instead whenever it would have predicted the newest offset within half the
+        tolerance (:func:`isoflow._compiled.flat.guess_or_fit`); 0: never.
     params : callable
         ``(method, problem, layout, steps) -> tuple``: the method's parameters as the stage
         reads them (arrays in the layout's units), for a run whose substeps have the lengths
@@ -181,6 +189,7 @@ class CompiledStage:
     nwork: int
     offsets: Callable[[Any, Any], int] = _no_offsets
     start_degree: Callable[[Any, Any], int | None] = _interpolating
+    start_fallback: Callable[[Any, Any], int] = _no_fallback
     params: Callable[[Any, Any, Layout, tuple[float, ...]], tuple[Any, ...]] = _no_params
     begin: Any = None
     begin_moves_state: bool = True
@@ -255,6 +264,10 @@ def _isomp_degree(method: IsoMP, problem: Any) -> int:
     return method.order_for(problem.algebra)
 
 
+def _isomp_fallback(method: IsoMP, problem: Any) -> int:
+    return method.fallback_for(problem.algebra)
+
+
 def _smm_offsets(method: SphericalMidpoint, problem: Any) -> int:
     return 1 if method.initial_guess == "extrapolate" else 0
 
@@ -269,6 +282,7 @@ register(
         isomp.NWORK,
         offsets=_isomp_offsets,
         start_degree=_isomp_degree,
+        start_fallback=_isomp_fallback,
         compensated=lambda method: bool(method.compensated),
         specializations={
             DenseBlas: Specialization(
@@ -380,6 +394,7 @@ register(
         isomp.NWORK,
         offsets=lambda method, problem: _isomp_offsets(method.base, problem),
         start_degree=lambda method, problem: _isomp_degree(method.base, problem),
+        start_fallback=lambda method, problem: _isomp_fallback(method.base, problem),
         params=split.params,
         begin=split.begin,
         step_data=_method_step_data,
