@@ -18,7 +18,7 @@ at step ``k`` of a polynomial in the step index fitted to the last ``m`` stage o
   :math:`1.3 \cdot 10^{-14} \|W\|` and two (``docs/user_guide/solvers.rst``).
 
 The weights are exact rationals (Gaussian elimination on the normal equations in
-:class:`fractions.Fraction`) rounded once, so every process computes the same bits: a resumed
+``fractions.Fraction``) rounded once, so every process computes the same bits: a resumed
 run continues with the start it began with.
 """
 
