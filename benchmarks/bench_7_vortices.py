@@ -139,7 +139,8 @@ def _stage_loop(runner: Any, args: tuple[Any, ...]) -> Any:
 
     dt = DriverTypes(runner.f, runner.fargs, runner.layout.record, runner.mp, runner.W.dtype,
                      len(runner.core))  # fmt: skip
-    dt.compile_stage(runner.begin, runner.impl.iterate, runner.impl.finish, runner.mix)
+    dt.compile_stage(runner.begin, runner.impl.iterate, runner.impl.finish, runner.mix,
+                     runner.start)  # fmt: skip
     sig = types.none(dt.iterate, dt.finish, dt.f, dt.fargs,
                      *(numba.typeof(a) for a in args[4:]), types.int64)  # fmt: skip
     return numba.njit(sig)(_stage_loop_py)

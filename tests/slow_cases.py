@@ -239,6 +239,8 @@ OWN_LOOP = (
     "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[(R^3,x)^N thermal particles, stochastic Cayley update]",
     "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[su(5) lanes ensemble, Cayley update]",
     "tests/test_restart_layouts.py::test_a_kill_at_any_write_resumes_bit_for_bit[so(5) dense, Cayley update]",
+    # the u(512) loop with the dense start from the lower triangle (and the NumPy path at 512)
+    "tests/test_dense_start.py::test_a_large_run_from_the_lower_triangle_keeps_its_states",
 )
 
 #: Over a second each on a warm cache (measured, 2026-11-26; see the module).

@@ -17,7 +17,10 @@ output (``iterate``) and the new state (``finish``). Everything else exists here
 * the extrapolated initial guess and the ring of stage offsets (:mod:`isoflow._compiled.flat`),
   one ring per substep position (substeps of different lengths keep separate histories); a
   fitted start that falls back to the interpolating one where that would have predicted the
-  newest offset within half the tolerance (``plan.kint``, single-lane units);
+  newest offset within half the tolerance (``plan.kint``, single-lane units). The start is a
+  function passed like the stage's (``start``: :func:`isoflow._compiled.flat.start`, or on
+  large dense states :func:`isoflow._compiled.dense_start.lower_start`, which reads the lower
+  triangle of the offsets and gives the same start);
 * the compensation of the update (``comp``, one per substep position: the rounding error
   the position's last addition left, handed to ``finish``; an empty buffer for a method that
   does not compensate, see :mod:`isoflow.methods.isomp`);
@@ -55,7 +58,7 @@ import numpy as np
 
 from . import blocks
 from .atomics import take
-from .flat import copy, guess, guess_or_fit, push
+from .flat import copy, push
 from .rules import CONTINUE, STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NON_FINITE, stopping_step
 
 __all__ = [
@@ -167,7 +170,7 @@ def _close_step(alive, ok, its, it_tot, it_max, restore, fail_code, fail_res, re
 
 @numba.njit(cache=True, nogil=True)
 def run_unit(  # type: ignore[no-untyped-def]
-    begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
+    begin, iterate, finish, mix, start, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, sv, sw, se, m0, tid,
 ):  # fmt: skip
     """Advance one unit (flat state ``W``, its ``ring`` ``(P, K, S)``, ``head``/``nh``
@@ -266,6 +269,7 @@ def run_unit(  # type: ignore[no-untyped-def]
     res_max = np.zeros(L)
     fail_res = np.zeros(L)
     restore = np.zeros(L, dtype=np.bool_)
+    kfit = plan.kint if L == 1 else 0  # a fitted start's fallback: single members only
     to_save = every - k0 % every  # steps until the next k with k % every == 0
     for step in range(plan.nsteps):
         k = k0 + step + 1
@@ -287,11 +291,8 @@ def run_unit(  # type: ignore[no-untyped-def]
             if plan.begin:
                 begin(f, fargs, lay, mp, sd, Wcur, work, hp)
             blocks.lane_sumsq(lay, Wcur, scale2)
-            if plan.kint > 0 and L == 1 and nh[p] > plan.kint:
-                limit = 0.5 * (solver.atol + solver.rtol * math.sqrt(scale2[0]))
-                guess_or_fit(Wcur, ring[p], head[p], nh[p], coefs, plan.kint, limit, X)
-            else:
-                guess(Wcur, ring[p], head[p], nh[p], coefs, X)
+            limit = 0.5 * (solver.atol + solver.rtol * math.sqrt(scale2[0])) if kfit else 0.0
+            start(lay, Wcur, ring[p], head[p], nh[p], coefs, kfit, limit, X)
             for q in range(L):
                 sc = math.sqrt(scale2[q])
                 tol[q] = solver.atol + solver.rtol * sc
@@ -375,7 +376,7 @@ def run_unit(  # type: ignore[no-untyped-def]
 # bytecode only (not by ``parallel=``), so one body compiled twice with ``cache=True`` would
 # share a cache entry and one variant could load the other.
 def drive_serial(  # type: ignore[no-untyped-def]
-    begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
+    begin, iterate, finish, mix, start, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, sv, sw, se,
 ):  # fmt: skip
     """:func:`run_unit` for every unit ``u`` of ``W`` (``(U, S)``), one after another, on the
@@ -383,13 +384,13 @@ def drive_serial(  # type: ignore[no-untyped-def]
     L = blocks.lanes(lay)
     for u in range(W.shape[0]):
         run_unit(
-            begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
+            begin, iterate, finish, mix, start, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
             nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, sv, sw, se, u * L, 0,
         )  # fmt: skip
 
 
 def drive_parallel(  # type: ignore[no-untyped-def]
-    begin, iterate, finish, mix, f, fargs, lay, mp, nwork,
+    begin, iterate, finish, mix, start, f, fargs, lay, mp, nwork,
     W, ring, head, nh, comp, coefs, gammas, plan, data, out, solver, rec, sv, sw, se,
 ):  # fmt: skip
     """:func:`run_unit` for every unit of ``W`` over numba threads, each on its thread's
@@ -406,8 +407,8 @@ def drive_parallel(  # type: ignore[no-untyped-def]
         u = take(taken)
         while u < U:
             run_unit(
-                begin, iterate, finish, mix, f, fargs, lay, mp, nwork, W[u], ring[u], head[u],
-                nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, sv, sw, se, u * L,
-                tid,
+                begin, iterate, finish, mix, start, f, fargs, lay, mp, nwork, W[u], ring[u],
+                head[u], nh[u], comp[u], coefs, gammas, plan, data, out, solver, rec, sv, sw, se,
+                u * L, tid,
             )  # fmt: skip
             u = take(taken)

@@ -30,9 +30,13 @@ __all__ = [
     "anderson",
     "copy",
     "guess",
+    "guess_or_fit",
+    "guess_range",
+    "miss_range",
     "no_mixing",
     "push",
     "rdot",
+    "start",
     "sumsq",
     "two_sum",
 ]
@@ -107,70 +111,67 @@ def _back(head, q, K):  # type: ignore[no-untyped-def]
     return j + K if j < 0 else j
 
 
-@numba.njit(cache=True)
-def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
-    r"""``X = W + sum_q coefs[nh-1, q] ring[(head - q) % K]`` (newest offset first), or
-    ``X = W`` when ``nh = 0``; returns :math:`\|W\|^2`.
+@numba.njit(cache=True, inline="always")
+def guess_range(W, ring, head, nh, coefs, X, a, b):  # type: ignore[no-untyped-def]
+    r""":func:`guess` on the entries ``a <= i < b`` only (a dense layout's start reads the
+    lower triangle of each offset, row by row: :mod:`isoflow._compiled.dense_start`).
 
-    The sum is evaluated left to right from the newest offset, as the NumPy path does
-    (:meth:`isoflow.IsoMP.initial_stage`); up to seven offsets are written out in one loop
-    and each further one is added in turn over chunks of ``X`` that stay in cache, so every
-    loop vectorizes and each offset is read once.
+    Every entry goes through the same operations whatever the range, so a start assembled
+    from ranges equals :func:`guess`'s to the last bit.
     """
-    S = W.shape[0]
     K = ring.shape[0]
     if nh == 0:
-        for i in range(S):
+        for i in range(a, b):
             X[i] = W[i]
-        return sumsq(W)
+        return
     a0 = coefs[nh - 1, 0]
     d0 = ring[head]
     if nh == 1:
-        for i in range(S):
+        for i in range(a, b):
             X[i] = W[i] + a0 * d0[i]
-        return sumsq(W)
+        return
     a1 = coefs[nh - 1, 1]
     d1 = ring[_back(head, 1, K)]
     if nh == 2:
-        for i in range(S):
+        for i in range(a, b):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i])
-        return sumsq(W)
+        return
     a2 = coefs[nh - 1, 2]
     d2 = ring[_back(head, 2, K)]
     if nh == 3:
-        for i in range(S):
+        for i in range(a, b):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i])
-        return sumsq(W)
+        return
     a3 = coefs[nh - 1, 3]
     d3 = ring[_back(head, 3, K)]
     if nh == 4:
-        for i in range(S):
+        for i in range(a, b):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i])
-        return sumsq(W)
+        return
     a4 = coefs[nh - 1, 4]
     d4 = ring[_back(head, 4, K)]
     if nh == 5:  # IsoMP's order 4 (the default on particle states and large matrices)
-        for i in range(S):
+        for i in range(a, b):
             X[i] = W[i] + (a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i])
-        return sumsq(W)
+        return
     a5 = coefs[nh - 1, 5]
     d5 = ring[_back(head, 5, K)]
     if nh == 6:
-        for i in range(S):
+        for i in range(a, b):
             e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
             X[i] = W[i] + e
-        return sumsq(W)
+        return
     a6 = coefs[nh - 1, 6]
     d6 = ring[_back(head, 6, K)]
     if nh == 7:  # IsoMP's default order 6 on matrix states
-        for i in range(S):
+        for i in range(a, b):
             e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
             X[i] = W[i] + (e + a6 * d6[i])
-        return sumsq(W)
+        return
     # more offsets (a least-squares start fits up to 16): the first seven written out as
     # above, each further one added in turn, chunk by chunk so that X's chunk stays in cache
-    for c0 in range(0, S, _GUESS_CHUNK):
-        c1 = min(S, c0 + _GUESS_CHUNK)
+    for c0 in range(a, b, _GUESS_CHUNK):
+        c1 = min(b, c0 + _GUESS_CHUNK)
         for i in range(c0, c1):
             e = a0 * d0[i] + a1 * d1[i] + a2 * d2[i] + a3 * d3[i] + a4 * d4[i] + a5 * d5[i]
             X[i] = e + a6 * d6[i]
@@ -181,32 +182,31 @@ def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
                 X[i] = X[i] + aq * dq[i]
         for i in range(c0, c1):
             X[i] = W[i] + X[i]
-    return sumsq(W)
-
-
-@numba.njit(cache=True, inline="always")
-def _start_sum(base, e0, e1, e2, e3, e4, e5, e6, c, k, out):  # type: ignore[no-untyped-def]
-    """``out = base + sum_{q < k} c_q e_q`` for ``k = 5`` or ``7`` (the sum left to right)."""
-    c0, c1, c2, c3, c4 = c[0], c[1], c[2], c[3], c[4]
-    if k == 5:
-        for i in range(out.shape[0]):
-            out[i] = base[i] + (c0 * e0[i] + c1 * e1[i] + c2 * e2[i] + c3 * e3[i] + c4 * e4[i])
-    else:
-        c5, c6 = c[5], c[6]
-        for i in range(out.shape[0]):
-            x = c0 * e0[i] + c1 * e1[i] + c2 * e2[i] + c3 * e3[i] + c4 * e4[i] + c5 * e5[i]
-            out[i] = base[i] + (x + c6 * e6[i])
 
 
 @numba.njit(cache=True)
-def _interpolation_miss(W, ring, head, kint, c, X):  # type: ignore[no-untyped-def]
-    """``X = W + sum_{q < kint} c_q D_q`` (newest first) and, returned, the squared size of
+def guess(W, ring, head, nh, coefs, X):  # type: ignore[no-untyped-def]
+    r"""``X = W + sum_q coefs[nh-1, q] ring[(head - q) % K]`` (newest offset first), or
+    ``X = W`` when ``nh = 0``.
+
+    The sum is evaluated left to right from the newest offset, as the NumPy path does
+    (:meth:`isoflow.IsoMP.initial_stage`); up to seven offsets are written out in one loop
+    and each further one is added in turn over chunks of ``X`` that stay in cache, so every
+    loop vectorizes and each offset is read once.
+    """
+    guess_range(W, ring, head, nh, coefs, X, 0, W.shape[0])
+
+
+@numba.njit(cache=True, inline="always")
+def miss_range(W, ring, head, kint, c, X, a, b, ebuf):  # type: ignore[no-untyped-def]
+    """The interpolating start ``X = W + sum_{q < kint} c_q D_q`` (newest offset first) on the
+    entries ``a <= i < b`` and, returned, the squared size there of
     ``D_0 - sum_{q < kint} c_q D_{q+1}``: how far the same start would have missed the newest
-    offset from the ones before it. ``X`` without reassociation (it moves the state, see the
-    module docstring), the size as a norm. Written out for the default fallbacks
-    (``kint = 5, 7``: every offset loaded once per entry, chunk by chunk), a pass per offset
-    else."""
-    S = W.shape[0]
+    offset from the ones before it. ``kint`` is 5 or 7 (the fallbacks of IsoMP's default
+    starts, ``records.Plan``); every offset is loaded once per entry. ``X`` is formed as
+    :func:`guess_range` forms it with these weights; the miss goes through ``ebuf`` in
+    chunks of its length and is measured by :func:`sumsq` (a norm, reassociated: the module
+    docstring)."""
     K = ring.shape[0]
     d0 = ring[head]
     d1 = ring[_back(head, 1, K)]
@@ -214,54 +214,54 @@ def _interpolation_miss(W, ring, head, kint, c, X):  # type: ignore[no-untyped-d
     d3 = ring[_back(head, 3, K)]
     d4 = ring[_back(head, 4, K)]
     d5 = ring[_back(head, 5, K)]
-    if kint == 5 or kint == 7:
-        d6 = ring[_back(head, 6 if kint == 7 else 0, K)]
-        d7 = ring[_back(head, 7 if kint == 7 else 0, K)]
-        ebuf = np.empty(min(S, _GUESS_CHUNK), dtype=X.dtype)
-        negc = -c
-        acc = 0.0
-        for c0_ in range(0, S, _GUESS_CHUNK):
-            n = min(S, c0_ + _GUESS_CHUNK) - c0_
-            c1_ = c0_ + n
-            _start_sum(W[c0_:c1_], d0[c0_:c1_], d1[c0_:c1_], d2[c0_:c1_], d3[c0_:c1_],
-                       d4[c0_:c1_], d5[c0_:c1_], d6[c0_:c1_], c, kint, X[c0_:c1_])  # fmt: skip
-            _start_sum(d0[c0_:c1_], d1[c0_:c1_], d2[c0_:c1_], d3[c0_:c1_], d4[c0_:c1_],
-                       d5[c0_:c1_], d6[c0_:c1_], d7[c0_:c1_], negc, kint, ebuf[:n])  # fmt: skip
-            acc += sumsq(ebuf[:n])  # a norm: reassociated (module docstring)
-        return acc
-    for i in range(S):  # any other fallback: a pass per offset
-        X[i] = 0.0
-    total = 0.0
-    e = np.empty(S, dtype=X.dtype)
-    for i in range(S):
-        e[i] = d0[i]
-    for q in range(kint + 1):
-        dq = ring[_back(head, q, K)]
-        if q < kint:
-            cq = c[q]
-            for i in range(S):
-                X[i] = X[i] + cq * dq[i]
-        if q > 0:
-            cm = c[q - 1]
-            for i in range(S):
-                e[i] = e[i] - cm * dq[i]
-    for i in range(S):
-        X[i] = W[i] + X[i]
-        v = e[i]
-        total += v.real * v.real + v.imag * v.imag
-    return total
+    d6 = ring[_back(head, 6 if kint == 7 else 0, K)]
+    d7 = ring[_back(head, 7 if kint == 7 else 0, K)]
+    c0, c1, c2, c3, c4 = c[0], c[1], c[2], c[3], c[4]
+    c5, c6 = (c[5], c[6]) if kint == 7 else (0.0, 0.0)
+    acc = 0.0
+    for j0 in range(a, b, ebuf.shape[0]):
+        j1 = min(b, j0 + ebuf.shape[0])
+        if kint == 5:
+            for i in range(j0, j1):
+                X[i] = W[i] + (c0 * d0[i] + c1 * d1[i] + c2 * d2[i] + c3 * d3[i] + c4 * d4[i])
+                ebuf[i - j0] = d0[i] - (
+                    c0 * d1[i] + c1 * d2[i] + c2 * d3[i] + c3 * d4[i] + c4 * d5[i]
+                )
+        else:
+            for i in range(j0, j1):
+                x = c0 * d0[i] + c1 * d1[i] + c2 * d2[i] + c3 * d3[i] + c4 * d4[i] + c5 * d5[i]
+                X[i] = W[i] + (x + c6 * d6[i])
+                y = c0 * d1[i] + c1 * d2[i] + c2 * d3[i] + c3 * d4[i] + c4 * d5[i] + c5 * d6[i]
+                ebuf[i - j0] = d0[i] - (y + c6 * d7[i])
+        acc += sumsq(ebuf[: j1 - j0])
+    return acc
 
 
 @numba.njit(cache=True)
 def guess_or_fit(W, ring, head, nh, coefs, kint, limit, X):  # type: ignore[no-untyped-def]
     """The start of a fitted stage (:func:`guess` with the fit's weights ``coefs[nh - 1]``),
-    unless the interpolating start on the newest ``kint`` offsets (weights ``coefs[-1]``)
-    would have predicted the newest offset from the ``kint`` before it within ``limit`` (half
-    the solve's tolerance): then that start, which reads fewer offsets. Needs ``nh > kint``.
-    Returns whether the interpolating start was taken."""
-    miss2 = _interpolation_miss(W, ring, head, kint, coefs[coefs.shape[0] - 1], X)
+    unless the interpolating start on the newest ``kint`` offsets (weights ``coefs[-1]``,
+    ``kint`` 5 or 7) would have predicted the newest offset from the ``kint`` before it within
+    ``limit`` (half the solve's tolerance): then that start, which reads fewer offsets. Needs
+    ``nh > kint``. Returns whether the interpolating start was taken."""
+    S = W.shape[0]
+    ebuf = np.empty(min(S, _GUESS_CHUNK), dtype=X.dtype)
+    miss2 = miss_range(W, ring, head, kint, coefs[coefs.shape[0] - 1], X, 0, S, ebuf)
     if miss2 <= limit * limit:
         return True
+    guess_range(W, ring, head, nh, coefs, X, 0, S)
+    return False
+
+
+@numba.njit(cache=True)
+def start(lay, W, ring, head, nh, coefs, kint, limit, X):  # type: ignore[no-untyped-def]
+    """The driver's start on the flat state (any layout ``lay``): :func:`guess_or_fit` when
+    ``kint > 0`` and more than ``kint`` offsets are stored, else :func:`guess`; whether the
+    interpolating fallback was taken. A run's start is passed to the driver as a function
+    value (:mod:`isoflow._compiled.signatures`), so a layout with a start of its own
+    (:mod:`isoflow._compiled.dense_start`) costs other runs no compilation."""
+    if kint > 0 and nh > kint:
+        return guess_or_fit(W, ring, head, nh, coefs, kint, limit, X)
     guess(W, ring, head, nh, coefs, X)
     return False
 

@@ -37,6 +37,7 @@ from ..nonlinear import FixedPoint
 from ..problems import IsospectralProblem
 from . import driver
 from .dense import DenseBlas, dense_layout
+from .dense_start import start_for
 from .draws_ahead import StepDraws, how_to_draw, pieces
 from .flat import anderson, no_mixing
 from .lanes import lanes_layout
@@ -199,6 +200,7 @@ class CompiledRunner(Runner):
         self.checkpoints_at_saves = layout.restart_at_saves  # see Layout.restart_at_saves
         self.begin = impl.begin if impl.begin is not None else no_begin
         self.mix = anderson if self.solver.anderson > 0 else no_mixing
+        self.start = start_for(self.layout.record, self.W, self.kmax, self.kint)
         self.parallel = self.U >= 2 and _threads() > 1 and self._threads_allowed()
         self._drive: Any = None
         self._buffers: tuple[Array, Array, Array] | None = None
@@ -334,7 +336,7 @@ class CompiledRunner(Runner):
         dt = DriverTypes(
             self.f, self.fargs, self.layout.record, self.mp, self.W.dtype, len(self.core)
         )
-        dt.compile_stage(self.begin, impl.iterate, impl.finish, self.mix)
+        dt.compile_stage(self.begin, impl.iterate, impl.finish, self.mix, self.start)
         par = self.parallel if parallel is None else parallel
         return compiled_driver(dt.driver_signature(args), par, units=args[3].shape[0])
 
@@ -389,7 +391,10 @@ class CompiledRunner(Runner):
 
     def _head(self) -> tuple[Any, ...]:
         """The driver's first arguments: the stage's functions, the mixing and the field."""
-        return (self.begin, self.impl.iterate, self.impl.finish, self.mix, self.f, self.fargs)
+        return (
+            self.begin, self.impl.iterate, self.impl.finish, self.mix, self.start, self.f,
+            self.fargs,
+        )  # fmt: skip
 
     def _call(self, args: tuple[Any, ...]) -> None:
         """Run the compiled driver on ``args``; the first call gets it from :meth:`_driver`

@@ -12,7 +12,10 @@ Anderson mixing is passed the same way (``mix``: :func:`~isoflow._compiled.flat.
 :func:`~isoflow._compiled.flat.no_mixing` for a run without it): a function the driver calls
 directly is compiled into every driver again (numba links its code into the driver's and
 optimizes the whole), and Anderson's took about 1 s of each driver's compilation and 4 s of
-the first one's (measured, 2026-11-26), for the few runs that mix.
+the first one's (measured, 2026-11-26), for the few runs that mix. The start is passed the same
+way (``start``: :func:`~isoflow._compiled.flat.start`, or
+:func:`~isoflow._compiled.dense_start.lower_start` on large dense states, whose threaded
+pieces cost about 8 s of compilation that other runs should not pay).
 
 A serial run of one unit (a single system, one member of :meth:`~isoflow._compiled.runner.
 CompiledRunner._isolate`) calls :func:`~isoflow._compiled.driver.run_unit` itself
@@ -67,20 +70,24 @@ class DriverTypes:
         F2 = types.Array(types.float64, 2, "C")
         I8 = types.int64
         self.mix = types.FunctionType(types.none(I8, A1, A1, A2, A2, F2, A1, A1, A1, F1, f8))
+        self.start = types.FunctionType(
+            types.boolean(numba.typeof(lay), A1, A2, I8, I8, F2, I8, f8, A1)
+        )
 
-    def compile_stage(self, begin: Any, iterate: Any, finish: Any, mix: Any) -> None:
-        """Compile the stage functions and the mixing for these types (loaded from the cache
-        when there)."""
+    def compile_stage(self, begin: Any, iterate: Any, finish: Any, mix: Any, start: Any) -> None:
+        """Compile the stage functions, the mixing and the start for these types (loaded from
+        the cache when there)."""
         begin.compile(self.begin.signature)
         iterate.compile(self.iterate.signature)
         finish.compile(self.finish.signature)
         mix.compile(self.mix.signature)
+        start.compile(self.start.signature)
 
     def driver_signature(self, args: tuple[Any, ...]) -> Any:
         """The signature of :func:`~isoflow._compiled.driver.drive_serial` for the call
-        ``drive(begin, iterate, finish, mix, f, fargs, *args)``."""
+        ``drive(begin, iterate, finish, mix, start, f, fargs, *args)``."""
         return types.none(
-            self.begin, self.iterate, self.finish, self.mix, self.f, self.fargs,
+            self.begin, self.iterate, self.finish, self.mix, self.start, self.f, self.fargs,
             *(numba.typeof(a) for a in args),
         )  # fmt: skip
 
@@ -138,7 +145,7 @@ def _split(args: tuple[Any, ...]) -> tuple[tuple[Any, ...], tuple[Any, ...], tup
     arrays with a unit axis (``W, ring, head, nh, comp``), between the functions, the layout
     and the scratch count before them and the shared arrays, records and per-thread buffers
     after them."""
-    return args[:9], args[9:14], args[14:]
+    return args[:10], args[10:15], args[15:]
 
 
 @numba.njit(cache=True)
