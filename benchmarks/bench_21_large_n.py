@@ -20,6 +20,15 @@ against an older commit, and the thread scaling of one iteration.
    ``threads=2`` ran before) recorded beside, timed after the others (an OpenBLAS thread spins
    on its core for a while after each call).
 
+**Measured** (Intel Xeon host, idle, 2026-11-28 11:24-11:39 UTC, ``python
+benchmarks/run_all.py --only 21``), after the start of large dense states came to read the
+lower triangle of the offsets (``isoflow._compiled.dense_start``; the same starts bit for
+bit): part 1 **0.63 at N = 512 and 0.14 at N = 1024 with one thread** (0.63 and 0.11 with
+two), 2.3 and 1.82 iterations a step against 4.28 and 3.32, the same energy error
+(6.17e-6, 3.08e-6) and Casimir drift (1.7e-15, 1.2e-15) as the old code. Part 2: 1.53x at
+N = 512 (29.5 against 19.3 ms a step's iteration) and **1.79x at N = 1024**; the iteration
+alone 1.82x and 1.89x.
+
 **Measured** (Intel Xeon host, idle, 2026-11-28 08:08-08:37 UTC, ``python
 benchmarks/run_all.py --only 13,21``), after the start of dense matrices from ``n = 512`` came
 to fit 16 (from ``n = 1024``: 12) offsets by least squares (``docs/user_guide/solvers.rst``;
