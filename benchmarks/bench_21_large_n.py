@@ -14,7 +14,11 @@ against an older commit, and the thread scaling of one iteration.
 2. One iteration at N = 512 and 1024 (quick: 256) with two threads against one, both in this
    process, alternately (target: at least 1.7x faster with two): what ``threads=2`` runs (the
    planar stage's pieces on two numba threads, one BLAS thread each) against ``threads=1``; a
-   step's time over its iterations (the row's value), and, as ``iteration_alone``, the
+   step's time over its iterations (the row's value: chunks of ``CHUNK_STEPS`` steps after
+   the first ``WARM_STEPS`` of the run, as a long run takes them; until 2026-11-28 the row
+   timed single steps from the run's second, whose calls and many iterations read 1.60x at
+   N = 512 in a probe where chunks of 8 steps after 16 read 1.92x), and, as
+   ``iteration_alone``, the
    stage's ``iterate`` called by itself (``B(X)``, the products, the passes after them;
    without the start and the offsets); two BLAS threads and one numba thread (what
    ``threads=2`` ran before) recorded beside, timed after the others (an OpenBLAS thread spins
@@ -25,9 +29,11 @@ benchmarks/run_all.py --only 21``), after the start of large dense states came t
 lower triangle of the offsets (``isoflow._compiled.dense_start``; the same starts bit for
 bit): part 1 **0.63 at N = 512 and 0.14 at N = 1024 with one thread** (0.63 and 0.11 with
 two), 2.3 and 1.82 iterations a step against 4.28 and 3.32, the same energy error
-(6.17e-6, 3.08e-6) and Casimir drift (1.7e-15, 1.2e-15) as the old code. Part 2: 1.53x at
-N = 512 (29.5 against 19.3 ms a step's iteration) and **1.79x at N = 1024**; the iteration
-alone 1.82x and 1.89x.
+(6.17e-6, 3.08e-6) and Casimir drift (1.7e-15, 1.2e-15) as the old code. Part 2 as it timed
+until then (single steps from the run's second): 1.53x at N = 512 and 1.79x at N = 1024;
+rerun at 11:41 UTC on chunks of steps 17-40 (``WARM_STEPS``, ``CHUNK_STEPS``): **1.87x and
+1.80x** (35.7 against 19.1 ms a step's iteration at N = 512, 217 against 120 at 1024); the
+iteration alone 1.85x and 1.90x.
 
 **Measured** (Intel Xeon host, idle, 2026-11-28 08:08-08:37 UTC, ``python
 benchmarks/run_all.py --only 13,21``), after the start of dense matrices from ``n = 512`` came
@@ -150,6 +156,10 @@ from suite import StepTimer, benchmark, record
 BASELINE_REV = os.environ.get("ISOFLOW_BASELINE_REV", "59b7df7")
 STEPS = 50
 REPEATS = 2
+#: Part 2 times steps of a long run: after the first ``WARM_STEPS`` (the start's window of 16
+#: offsets full), ``CHUNK_STEPS`` steps a call, as a solve's chunks take them.
+WARM_STEPS = 16
+CHUNK_STEPS = 8
 
 _PROBE = """
 import json, sys, time
@@ -253,11 +263,14 @@ def _thread_scaling(N: int) -> dict[str, Any]:
     timers = {k: StepTimer(prob, iso.IsoMP(), W0, h) for k in plans}
     best = dict.fromkeys(plans, np.inf)
     for group in _GROUPS:  # two BLAS threads apart: OpenBLAS's threads spin after a call
+        for k in group:  # the first steps, to the full window of offsets (not timed)
+            with thread_limits(**plans[k]):
+                timers[k].advance(WARM_STEPS)
         for rep in range(4):
             for k in group:
                 with thread_limits(**plans[k]):
                     t = time.perf_counter()
-                    its = timers[k].advance(1)
+                    its = timers[k].advance(CHUNK_STEPS)
                     if rep:  # the first round is the warm-up
                         best[k] = min(best[k], (time.perf_counter() - t) / its)
     speedup = best["1"] / best["2"]
