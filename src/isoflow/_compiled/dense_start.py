@@ -66,11 +66,6 @@ def _range_start(W, ring, head, nh, coefs, X, a, b):  # type: ignore[no-untyped-
 
 
 @numba.njit(cache=True)
-def _range_miss(W, ring, head, kint, c, X, a, b, ebuf):  # type: ignore[no-untyped-def]
-    return miss_range(W, ring, head, kint, c, X, a, b, ebuf)
-
-
-@numba.njit(cache=True)
 def _pair_start(W, ring, head, nh, coefs, X, n, k):  # type: ignore[no-untyped-def]
     """The start on the lower parts of rows ``k`` and ``n - 1 - k`` (as long together as
     any other pair)."""
@@ -81,17 +76,20 @@ def _pair_start(W, ring, head, nh, coefs, X, n, k):  # type: ignore[no-untyped-d
 
 
 @numba.njit(cache=True)
+def _row_miss(W, ring, head, kint, c, X, n, i, ebuf):  # type: ignore[no-untyped-def]
+    """The interpolating start on the lower part of row ``i`` and its miss there, the
+    entries left of the diagonal counted twice (their mirrors); ``ebuf`` scratch of length
+    ``n``."""
+    off = miss_range(W, ring, head, kint, c, X, i * n, i * n + i, ebuf)
+    return 2.0 * off + miss_range(W, ring, head, kint, c, X, i * n + i, i * n + i + 1, ebuf)
+
+
+@numba.njit(cache=True)
 def _pair_miss(W, ring, head, kint, c, X, n, k, ebuf):  # type: ignore[no-untyped-def]
-    """The interpolating start on the lower parts of rows ``k`` and ``n - 1 - k`` and its
-    miss there, the entries left of the diagonal counted twice (their mirrors); ``ebuf``
-    scratch of length ``n``."""
-    i = k
-    off = _range_miss(W, ring, head, kint, c, X, i * n, i * n + i, ebuf)
-    acc = 2.0 * off + _range_miss(W, ring, head, kint, c, X, i * n + i, i * n + i + 1, ebuf)
-    i = n - 1 - k
-    if i != k:
-        off = _range_miss(W, ring, head, kint, c, X, i * n, i * n + i, ebuf)
-        acc += 2.0 * off + _range_miss(W, ring, head, kint, c, X, i * n + i, i * n + i + 1, ebuf)
+    """:func:`_row_miss` on rows ``k`` and ``n - 1 - k``, their misses added."""
+    acc = _row_miss(W, ring, head, kint, c, X, n, k, ebuf)
+    if n - 1 - k != k:
+        acc += _row_miss(W, ring, head, kint, c, X, n, n - 1 - k, ebuf)
     return acc
 
 
