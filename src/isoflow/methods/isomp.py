@@ -698,12 +698,17 @@ def default_extrapolation_order(algebra: Algebra) -> int:
     iterations a step with degree 4, 3.07 with 6; ``docs/user_guide/solvers.rst`` has the
     measurements).
     """
-    base = algebra
-    while isinstance(getattr(base, "base", None), Algebra):  # stacks and pairs of a space
-        base = base.base  # type: ignore[attr-defined]
-    if isinstance(base, ParticleVectors):
+    if isinstance(_base_space(algebra), ParticleVectors):
         return 4
     return 4 if algebra.shape[-1] >= LARGE_MATRIX_N else 6
+
+
+def _base_space(algebra: Algebra) -> Algebra:
+    """The space a stack or pair of spaces is made of (``algebra`` itself otherwise)."""
+    base = algebra
+    while isinstance(getattr(base, "base", None), Algebra):
+        base = base.base  # type: ignore[attr-defined]
+    return base
 
 
 def resolve_extrapolation_order(order: int | None, algebra: Algebra) -> int:
@@ -745,9 +750,7 @@ def default_start(algebra: Algebra) -> tuple[int, int, int]:
     """
     p = default_extrapolation_order(algebra)
     n = algebra.shape[-1]
-    plain_matrices = not isinstance(algebra, ParticleVectors) and not isinstance(
-        getattr(algebra, "base", None), Algebra
-    )
+    plain_matrices = _base_space(algebra) is algebra and not isinstance(algebra, ParticleVectors)
     if plain_matrices and n >= FITTED_START_MIN_N:
         fp, K = FITTED_START if n < LARGE_MATRIX_N else FITTED_START_LARGE
         return fp, K, p + 1
