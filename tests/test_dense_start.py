@@ -94,6 +94,56 @@ def test_the_fallback_decides_as_the_flat_pass(
         assert np.array_equal(got, want)
 
 
+@pytest.mark.parametrize(("s", "complex_"), SPACES)
+@pytest.mark.parametrize("threaded", [False, True])
+def test_the_fallback_stops_measuring_once_the_miss_passes_the_limit(
+    s: float, complex_: bool, threaded: bool
+) -> None:
+    """Both passes measure a part of the miss first (the lower triangle: the last row pairs,
+    about the middle rows; the flat pass: its first chunk) and take the fit at once when that
+    part passes the limit.
+    For a limit below that part, one between it and the whole miss, and one above: the
+    decision of the whole miss (computed here with NumPy) and, to the last bit, the fit's
+    or the interpolation's start as :func:`isoflow._compiled.flat.guess` forms them."""
+    n, kint, head = 120, 7, 11
+    W, ring, coefs = _case(n, s, complex_, seed=3)
+    d = [ring[(head - q) % K] for q in range(kint + 1)]
+    c = interpolation_weights(kint)
+    e = (d[0] - sum(cq * dq for cq, dq in zip(c, d[1:], strict=False))).reshape(n, n)
+    rows = np.abs(np.tril(e)) ** 2
+    lower2 = 2 * rows.sum(axis=1) - np.diagonal(rows)  # each row's part, mirrors counted
+    npair = (n + 1) // 2
+    m = dense_start.first_pairs(n)
+    assert 1 <= m < npair
+    firsts = [k for k in range(npair - m, npair)] + [n - 1 - k for k in range(npair - m, npair)]
+    firsts = sorted(set(firsts))  # the middle row of an odd n is its own pair
+    parts = {
+        "lower": (float(lower2[firsts].sum()), float(lower2.sum())),
+        "flat": (float(np.sum(np.abs(e.reshape(-1)[:2048]) ** 2)), float(np.sum(np.abs(e) ** 2))),
+    }
+    interp_coefs = np.zeros_like(coefs)
+    interp_coefs[kint - 1, :kint] = c
+    fit = np.empty_like(W)
+    flat.guess(W, ring, head, K, coefs, fit)
+    interp = np.empty_like(W)
+    flat.guess(W, ring, head, kint, interp_coefs, interp)
+    for name, (first, whole) in parts.items():
+        assert 4 * first < whole, name  # the three limits below are apart
+        for limit2 in (0.5 * first, np.sqrt(first * whole), 2 * whole):
+            limit = float(np.sqrt(limit2))
+            taken = bool(whole <= limit2)
+            got = np.full_like(W, np.nan)
+            with thread_limits(numba=2 if threaded else 1):
+                if name == "lower":
+                    took = dense_start.start_or_fit_lower(
+                        W, ring, head, K, coefs, kint, limit, got, n, s, threaded
+                    )
+                else:
+                    took = flat.guess_or_fit(W, ring, head, K, coefs, kint, limit, got)
+            assert took is taken, (name, limit2 / whole)
+            assert np.array_equal(got, interp if taken else fit), (name, limit2 / whole)
+
+
 def _linear_field(n: int) -> tuple[iso.IsospectralProblem, np.ndarray]:
     alg = iso.algebras.u(n)
     d = np.linspace(0.5, 1.5, n)

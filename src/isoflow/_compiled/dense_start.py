@@ -12,7 +12,9 @@ goes through the operations :func:`~isoflow._compiled.flat.guess` would apply, a
 upper triangle is the mirror that sum would have produced, so the start is the same to the
 last bit while half the offsets' memory is read (``tests/test_dense_start.py``). The
 fallback's check (:func:`~isoflow._compiled.flat.guess_or_fit`) measures its miss on the
-lower triangle, off-diagonal entries twice. Where the offsets read fit in cache (below
+lower triangle, off-diagonal entries twice, first on one row pair in :data:`FIRST_SHARE`:
+where that part alone surely passes the limit, the fit is taken without the rest of the
+check (the same decision). Where the offsets read fit in cache (below
 :data:`LOWER_MIN_BYTES`) the flat functions run instead (:func:`start_for` chooses once per
 run; the driver takes the start as a function value, so that other runs do not compile
 this module's threaded pieces).
@@ -32,13 +34,30 @@ import numpy as np
 from .dense import DenseBlas
 from .flat import guess_range, miss_range, start
 
-__all__ = ["LOWER_MIN_BYTES", "lower_start", "start_for", "start_lower", "start_or_fit_lower"]
+__all__ = [
+    "FIRST_SHARE",
+    "LOWER_MIN_BYTES",
+    "SURELY_PAST",
+    "first_pairs",
+    "lower_start",
+    "start_for",
+    "start_lower",
+    "start_or_fit_lower",
+]
 
 #: The lower triangle is read when the offsets a start reads take at least this many bytes;
 #: below, they stay in cache, and :mod:`isoflow._compiled.flat`'s single pass is faster than
 #: the rows and the mirror (``so(512)``'s interpolating start on 7 offsets, 14 MB: 3-6 % a
 #: step slower by rows). Either way the start is the same to the last bit.
 LOWER_MIN_BYTES = 32 * 2**20
+#: :func:`start_or_fit_lower` measures the fallback's miss on one in this many row pairs
+#: first, and takes the fit at once if that part passes the limit.
+FIRST_SHARE = 16
+#: A part of the miss that passes ``limit**2`` by this factor passes it whatever the sum the
+#: rest adds it into: ``m`` non-negative terms summed in any order are within
+#: ``m u / (1 - m u)`` (``u = 2**-53``) of their exact sum, below ``1e-9`` for any ``n``
+#: that fits in memory.
+SURELY_PAST = 1.0 + 1e-6
 #: Side of the square tiles the upper triangle is mirrored in.
 _MIRROR_TILE = 32
 
@@ -94,15 +113,29 @@ def _pair_miss(W, ring, head, kint, c, X, n, k, ebuf):  # type: ignore[no-untype
 
 
 @numba.njit(cache=True, parallel=True)
-def _pairs_threaded(W, ring, head, nh, coefs, kint, X, n, parts):  # type: ignore[no-untyped-def]
-    """The row pairs over numba threads: the start when ``kint == 0``, else the
-    interpolating start on ``kint`` offsets with each pair's miss in ``parts``."""
+def _pairs_threaded(W, ring, head, nh, coefs, kint, X, n, parts, k0, k1):  # type: ignore[no-untyped-def]
+    """The row pairs ``k0 <= k < k1`` over numba threads: the start when ``kint == 0``, else
+    the interpolating start on ``kint`` offsets with each pair's miss in ``parts[k]``."""
     c = coefs[coefs.shape[0] - 1]
-    for k in numba.prange((n + 1) // 2):
+    for t in numba.prange(k1 - k0):
+        k = k0 + t
         if kint == 0:
             _pair_start(W, ring, head, nh, coefs, X, n, k)
         else:
             parts[k] = _pair_miss(W, ring, head, kint, c, X, n, k, np.empty(n, dtype=X.dtype))
+
+
+@numba.njit(cache=True)
+def _miss_parts(W, ring, head, kint, coefs, X, n, threaded, parts, k0, k1):  # type: ignore[no-untyped-def]
+    """The interpolating start on row pairs ``k0 <= k < k1`` and their misses in
+    ``parts[k]`` (over numba threads if ``threaded``)."""
+    if threaded:
+        _pairs_threaded(W, ring, head, 0, coefs, kint, X, n, parts, k0, k1)
+        return
+    c = coefs[coefs.shape[0] - 1]
+    ebuf = np.empty(n, dtype=X.dtype)
+    for k in range(k0, k1):
+        parts[k] = _pair_miss(W, ring, head, kint, c, X, n, k, ebuf)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -132,7 +165,7 @@ def start_lower(W, ring, head, nh, coefs, X, n, s, threaded):  # type: ignore[no
     and the mirror ``X[j, i] = s conj(X[i, j])`` (row pairs over numba threads if
     ``threaded``)."""
     if threaded:
-        _pairs_threaded(W, ring, head, nh, coefs, 0, X, n, np.empty(0))
+        _pairs_threaded(W, ring, head, nh, coefs, 0, X, n, np.empty(0), 0, (n + 1) // 2)
     else:
         for k in range((n + 1) // 2):
             _pair_start(W, ring, head, nh, coefs, X, n, k)
@@ -144,24 +177,39 @@ def start_or_fit_lower(W, ring, head, nh, coefs, kint, limit, X, n, s, threaded)
     """:func:`isoflow._compiled.flat.guess_or_fit` on an ``n x n`` state from the lower
     triangle (the miss over it, off-diagonal entries twice, added pair by pair in order
     whatever the threads): the same start, and the same decision but where the miss lies
-    within rounding of ``limit``."""
+    within rounding of ``limit``.
+
+    The last :func:`first_pairs` row pairs (the rows about the middle) are measured first:
+    the parts are squared sizes, so where their sum passes ``limit**2`` by more than the
+    rounding of any sum of the parts (:data:`SURELY_PAST`), the sum of all of them in order
+    does too, and the fit is formed without measuring the rest (Euler on the sphere, which
+    takes the fit at every step and misses most about the middle rows, then reads the
+    fallback's offsets a sixteenth of the way instead of all of it)."""
     npair = (n + 1) // 2
     parts = np.empty(npair)
-    if threaded:
-        _pairs_threaded(W, ring, head, nh, coefs, kint, X, n, parts)
-    else:
-        c = coefs[coefs.shape[0] - 1]
-        ebuf = np.empty(n, dtype=X.dtype)
+    k1 = npair - first_pairs(n)
+    _miss_parts(W, ring, head, kint, coefs, X, n, threaded, parts, k1, npair)
+    some = 0.0
+    for k in range(k1, npair):
+        some += parts[k]
+    limit2 = limit * limit
+    if not some > SURELY_PAST * limit2:
+        _miss_parts(W, ring, head, kint, coefs, X, n, threaded, parts, 0, k1)
+        miss2 = 0.0
         for k in range(npair):
-            parts[k] = _pair_miss(W, ring, head, kint, c, X, n, k, ebuf)
-    miss2 = 0.0
-    for k in range(npair):
-        miss2 += parts[k]
-    if miss2 <= limit * limit:
-        _mirror(X, n, s, threaded)
-        return True
+            miss2 += parts[k]
+        if miss2 <= limit2:
+            _mirror(X, n, s, threaded)
+            return True
     start_lower(W, ring, head, nh, coefs, X, n, s, threaded)
     return False
+
+
+@numba.njit(cache=True)
+def first_pairs(n):  # type: ignore[no-untyped-def]
+    """How many row pairs :func:`start_or_fit_lower` measures first: one in
+    :data:`FIRST_SHARE` of the ``(n + 1) // 2``, at least one."""
+    return max(1, ((n + 1) // 2) // FIRST_SHARE)
 
 
 @numba.njit(cache=True)

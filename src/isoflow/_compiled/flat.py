@@ -243,11 +243,24 @@ def guess_or_fit(W, ring, head, nh, coefs, kint, limit, X):  # type: ignore[no-u
     unless the interpolating start on the newest ``kint`` offsets (weights ``coefs[-1]``,
     ``kint`` 5 or 7) would have predicted the newest offset from the ``kint`` before it within
     ``limit`` (half the solve's tolerance): then that start, which reads fewer offsets. Needs
-    ``nh > kint``. Returns whether the interpolating start was taken."""
+    ``nh > kint``. Returns whether the interpolating start was taken.
+
+    The miss is summed chunk by chunk, and the pass stops at the first chunk that takes the
+    sum past ``limit**2`` (the rest could only add to it): the same decision and start as the
+    whole pass, at the cost of a few chunks where the fit is taken."""
     S = W.shape[0]
-    ebuf = np.empty(min(S, _GUESS_CHUNK), dtype=X.dtype)
-    miss2 = miss_range(W, ring, head, kint, coefs[coefs.shape[0] - 1], X, 0, S, ebuf)
-    if miss2 <= limit * limit:
+    L = min(S, _GUESS_CHUNK)
+    ebuf = np.empty(L, dtype=X.dtype)
+    c = coefs[coefs.shape[0] - 1]
+    limit2 = limit * limit
+    # chunk by chunk, the sums added in the order miss_range adds them over the whole state;
+    # once the sum passes the limit (adding a squared size never lowers it), the fit is taken
+    miss2 = 0.0
+    for j0 in range(0, S, L):
+        miss2 += miss_range(W, ring, head, kint, c, X, j0, min(S, j0 + L), ebuf)
+        if miss2 > limit2:
+            break
+    if miss2 <= limit2:
         return True
     guess_range(W, ring, head, nh, coefs, X, 0, S)
     return False
