@@ -24,6 +24,16 @@ against an older commit, and the thread scaling of one iteration.
    ``threads=2`` ran before) recorded beside, timed after the others (an OpenBLAS thread spins
    on its core for a while after each call).
 
+**Measured** (Intel Xeon host, idle, 2026-11-28 13:58-14:14 UTC, ``python
+benchmarks/run_all.py --only 21``), after the fallback check of the fitted start came to stop
+once its miss had surely passed the limit (``isoflow._compiled.dense_start``: the start 6.1
+against 7.9 ms a step at N = 512 inside a run): part 1 **0.64 at N = 512 and 0.13 at
+N = 1024 with one thread** (0.60 and 0.11 with two; 13.8 against 21.6 s per unit of
+simulated time at N = 512, the old code's time moving between runs as much as the gain);
+part 2 **1.93x and 1.83x** (the iteration alone 1.82x and 1.90x). What keeps N = 512 above
+0.5 after the first steps: the start misses by about the tolerance, so most steps take two
+iterations (``docs/user_guide/solvers.rst`` has the windows, degrees and tolerances tried).
+
 **Measured** (Intel Xeon host, idle, 2026-11-28 11:24-11:39 UTC, ``python
 benchmarks/run_all.py --only 21``), after the start of large dense states came to read the
 lower triangle of the offsets (``isoflow._compiled.dense_start``; the same starts bit for
